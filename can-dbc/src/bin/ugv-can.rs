@@ -1,0 +1,361 @@
+//! `ugv-can`: decode candump output with golf_car.dbc, encode messages for cansend.
+//!
+//! ```text
+//! candump -L vcan0 | ugv-can decode            # or: candump vcan0 | ugv-can decode --json
+//! cansend vcan0 $(ugv-can encode STEERING_CMD Enable=1 TargetAngle=12.5 MaxRate=60 --counter 3)
+//! ```
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use golf_car_can::candump::{Compact, parse_line};
+use golf_car_can::e2e::{E2eRx, protect};
+use golf_car_can::{NETWORK, NetworkSpec, SignalSpec};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "ugv-can",
+    version,
+    about = "Decode and encode golf car CAN frames (golf_car.dbc)"
+)]
+struct Cli {
+    /// Use this DBC instead of the built-in golf_car.dbc.
+    #[arg(long, global = true, value_name = "FILE")]
+    dbc: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Decode candump lines (`candump -l` log form or plain `candump iface` form) from a
+    /// file or stdin, checking E2E counter and CRC per interface.
+    Decode {
+        /// Input file; stdin when absent or `-`.
+        input: Option<PathBuf>,
+        /// One JSON object per frame instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Do not check E2E counters and CRCs.
+        #[arg(long)]
+        no_e2e: bool,
+    },
+    /// Encode a message from SIGNAL=value pairs into `ID#DATA`, counter and CRC filled in.
+    /// Values are physical (e.g. TargetAngle=12.5) or value-table labels (Gear=forward);
+    /// signals not given are raw 0.
+    Encode {
+        /// Message name (case-insensitive) or ID (0x100).
+        message: String,
+        /// SIGNAL=value pairs.
+        signals: Vec<String>,
+        /// The E2E rolling counter (0-15).
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..16))]
+        counter: u8,
+    },
+    /// List the messages and signals of the DBC.
+    List,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("ugv-can: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    let loaded;
+    let network: &NetworkSpec = match &cli.dbc {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            loaded =
+                NetworkSpec::from_dbc(&text).with_context(|| format!("in {}", path.display()))?;
+            &loaded
+        }
+        None => &NETWORK,
+    };
+    match cli.command {
+        Command::Decode {
+            input,
+            json,
+            no_e2e,
+        } => decode(network, input, json, !no_e2e),
+        Command::Encode {
+            message,
+            signals,
+            counter,
+        } => {
+            println!("{}", encode(network, &message, &signals, counter)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::List => {
+            list(network);
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// Decimal places that show a signal's resolution.
+fn decimals(s: &SignalSpec) -> usize {
+    let places = -s.factor.abs().log10();
+    if places <= 0.0 {
+        0
+    } else {
+        (places.ceil() as usize).min(9)
+    }
+}
+
+fn decode(
+    network: &NetworkSpec,
+    input: Option<PathBuf>,
+    json: bool,
+    e2e: bool,
+) -> Result<ExitCode> {
+    let reader: Box<dyn BufRead> = match input.as_deref() {
+        None => Box::new(BufReader::new(std::io::stdin())),
+        Some(p) if p.as_os_str() == "-" => Box::new(BufReader::new(std::io::stdin())),
+        Some(p) => Box::new(BufReader::new(
+            std::fs::File::open(p).with_context(|| format!("opening {}", p.display()))?,
+        )),
+    };
+    let mut out = std::io::stdout().lock();
+    let mut receivers: BTreeMap<String, E2eRx<'_>> = BTreeMap::new();
+    let (mut frames, mut malformed) = (0u64, 0u64);
+    for (n, line) in reader.lines().enumerate() {
+        let line = line.with_context(|| format!("reading line {}", n + 1))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let frame = match parse_line(&line) {
+            Ok(f) => f,
+            Err(e) => {
+                malformed += 1;
+                eprintln!("ugv-can: line {}: {e}: {line:?}", n + 1);
+                continue;
+            }
+        };
+        frames += 1;
+        let iface = frame.interface.clone().unwrap_or_default();
+        let e2e_result = e2e.then(|| {
+            receivers
+                .entry(iface.clone())
+                .or_insert_with(|| E2eRx::new(network))
+                .accept_parts(frame.id, frame.extended, frame.remote, &frame.data)
+        });
+        let message = (!frame.extended)
+            .then(|| u16::try_from(frame.id).ok())
+            .flatten()
+            .and_then(|id| network.message(id));
+        let payload = message.and_then(|_| golf_car_can::codec::payload("", &frame.data).ok());
+        if json {
+            let mut obj = serde_json::Map::new();
+            if let Some(ts) = &frame.timestamp {
+                obj.insert("timestamp".into(), ts.clone().into());
+            }
+            if !iface.is_empty() {
+                obj.insert("interface".into(), iface.clone().into());
+            }
+            obj.insert("id".into(), frame.id.into());
+            obj.insert("extended".into(), frame.extended.into());
+            if let Some(m) = message {
+                obj.insert("message".into(), m.name.to_string().into());
+            }
+            if let (Some(m), Some(p)) = (message, payload) {
+                let signals: serde_json::Map<String, serde_json::Value> = m
+                    .decode_all(&p)
+                    .into_iter()
+                    .map(|v| {
+                        (
+                            v.name.to_owned(),
+                            serde_json::to_value(&v).unwrap_or_default(),
+                        )
+                    })
+                    .collect();
+                obj.insert("signals".into(), signals.into());
+            } else {
+                let hex: String = frame.data.iter().map(|b| format!("{b:02X}")).collect();
+                obj.insert("data".into(), hex.into());
+            }
+            match &e2e_result {
+                Some(Ok(_)) => {
+                    obj.insert("e2e".into(), "ok".into());
+                }
+                Some(Err(e)) => {
+                    obj.insert("e2e".into(), e.to_string().into());
+                }
+                None => {}
+            }
+            writeln!(out, "{}", serde_json::Value::Object(obj))?;
+        } else {
+            let mut text = String::new();
+            if let Some(ts) = &frame.timestamp {
+                text.push_str(&format!("({ts}) "));
+            }
+            if !iface.is_empty() {
+                text.push_str(&format!("{iface} "));
+            }
+            let compact = Compact {
+                id: frame.id,
+                extended: frame.extended,
+                data: &frame.data,
+            };
+            text.push_str(&compact.to_string());
+            match (message, payload) {
+                (Some(m), Some(p)) => {
+                    text.push_str(&format!(" {}", m.name));
+                    for (s, v) in m.signals.iter().zip(m.decode_all(&p)) {
+                        text.push_str(&format!(" {}={:.*}", v.name, decimals(s), v.value));
+                        if !v.unit.is_empty() {
+                            text.push_str(&format!(" {}", v.unit));
+                        }
+                        if let Some(label) = v.label {
+                            text.push_str(&format!(" ({label})"));
+                        }
+                    }
+                }
+                (Some(m), None) => text.push_str(&format!(" {}", m.name)),
+                (None, _) => text.push_str(" (not in the DBC)"),
+            }
+            match &e2e_result {
+                Some(Ok(_)) => text.push_str(" [e2e ok]"),
+                Some(Err(e)) => text.push_str(&format!(" [e2e REJECTED: {e}]")),
+                None => {}
+            }
+            writeln!(out, "{text}")?;
+        }
+    }
+    out.flush()?;
+    let rejected: u64 = receivers.values().map(|r| r.stats().rejected()).sum();
+    eprintln!("ugv-can: {frames} frames, {rejected} rejected by E2E, {malformed} malformed lines");
+    for (iface, rx) in &receivers {
+        let name = if iface.is_empty() {
+            "(no interface)"
+        } else {
+            iface
+        };
+        eprintln!("ugv-can: {name}: {}", serde_json::to_string(&rx.stats())?);
+    }
+    Ok(if malformed > 0 {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn encode(network: &NetworkSpec, key: &str, pairs: &[String], counter: u8) -> Result<String> {
+    let Some(message) = network.find_message(key) else {
+        let names: Vec<&str> = network.messages.iter().map(|m| m.name.as_ref()).collect();
+        bail!(
+            "no message {key:?} in the DBC (messages: {})",
+            names.join(", ")
+        );
+    };
+    let mut data = [0u8; 8];
+    for pair in pairs {
+        let Some((name, value)) = pair.split_once('=') else {
+            bail!("{pair:?} is not SIGNAL=value");
+        };
+        let Some(signal) = message
+            .signals
+            .iter()
+            .find(|s| s.name.eq_ignore_ascii_case(name))
+        else {
+            let names: Vec<&str> = message.signals.iter().map(|s| s.name.as_ref()).collect();
+            bail!(
+                "message {} has no signal {name:?} (signals: {})",
+                message.name,
+                names.join(", ")
+            );
+        };
+        if signal.is_e2e() {
+            bail!(
+                "{} is filled in by the E2E protection; use --counter",
+                signal.name
+            );
+        }
+        if let Some(v) = signal
+            .values
+            .iter()
+            .find(|v| v.label.eq_ignore_ascii_case(value))
+        {
+            signal.set_raw(&mut data, i128::from(v.raw))?;
+        } else {
+            let physical: f64 = value.parse().map_err(|_| {
+                let labels: Vec<&str> = signal.values.iter().map(|v| v.label.as_ref()).collect();
+                anyhow::anyhow!(
+                    "{}: {value:?} is neither a number nor a label{}",
+                    signal.name,
+                    if labels.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", labels.join(", "))
+                    }
+                )
+            })?;
+            signal.set(&mut data, physical)?;
+        }
+    }
+    protect(message.id, &mut data, counter);
+    Ok(Compact {
+        id: u32::from(message.id),
+        extended: false,
+        data: &data,
+    }
+    .to_string())
+}
+
+fn list(network: &NetworkSpec) {
+    println!("{} at {} bit/s", network.name, network.baudrate);
+    for m in network.messages.iter() {
+        let timing = match (m.cycle_time_ms, m.timeout_ms) {
+            (Some(c), Some(t)) => format!("every {c} ms, timeout {t} ms"),
+            (Some(c), None) => format!("every {c} ms"),
+            (None, Some(t)) => format!("timeout {t} ms"),
+            (None, None) => "on event".to_owned(),
+        };
+        println!(
+            "{:#05x} {} from {} ({timing})",
+            m.id,
+            m.name,
+            m.senders.join(", ")
+        );
+        for s in m.signals.iter() {
+            let labels: Vec<String> = s
+                .values
+                .iter()
+                .map(|v| format!("{}={}", v.raw, v.label))
+                .collect();
+            println!(
+                "      {:<14} {}|{}@{}{} x{} +{} [{}, {}] {}{}",
+                s.name,
+                s.start_bit,
+                s.size,
+                if s.byte_order == golf_car_can::spec::ByteOrder::Intel {
+                    1
+                } else {
+                    0
+                },
+                if s.signed { "-" } else { "+" },
+                s.factor,
+                s.offset,
+                s.min,
+                s.max,
+                s.unit,
+                if labels.is_empty() {
+                    String::new()
+                } else {
+                    format!(" {{{}}}", labels.join(", "))
+                }
+            );
+        }
+    }
+}

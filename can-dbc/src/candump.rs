@@ -1,0 +1,268 @@
+//! can-utils text formats: the `candump -l` log line `(ts) iface ID#DATA`, the
+//! `cansend` frame `ID#DATA`, and the plain `candump iface` line
+//! `iface  ID   [len]  XX XX ...` (with or without a `-t` timestamp in front).
+
+use std::fmt;
+
+/// One frame read from a text line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TextFrame {
+    /// The timestamp as written (`1700000000.123456`, or a date for `-t a`).
+    pub timestamp: Option<String>,
+    pub interface: Option<String>,
+    pub id: u32,
+    pub extended: bool,
+    pub remote: bool,
+    pub data: Vec<u8>,
+}
+
+/// Why a line is not a frame.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CandumpError {
+    #[error("empty line")]
+    Empty,
+    #[error("unterminated timestamp '(' ")]
+    Timestamp,
+    #[error("no frame after the interface name")]
+    MissingFrame,
+    #[error("CAN ID {0:?} is not hexadecimal")]
+    BadId(String),
+    #[error("CAN ID {0:?} is out of range (11-bit IDs take 3 hex digits, 29-bit IDs 8)")]
+    IdRange(String),
+    #[error("data {0:?} is not an even number of hex digits")]
+    BadData(String),
+    #[error("CAN FD frame ({0:?}); the golf car bus is classic CAN")]
+    CanFd(String),
+    #[error("data has {found} bytes but the length field says {declared}")]
+    LengthMismatch { declared: usize, found: usize },
+    #[error("more than 8 data bytes ({0})")]
+    TooLong(usize),
+    #[error("length field {0:?} is not [0]..[8]")]
+    BadLength(String),
+}
+
+fn parse_id(text: &str) -> Result<(u32, bool), CandumpError> {
+    if text.is_empty() || !text.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(CandumpError::BadId(text.to_owned()));
+    }
+    let id = u32::from_str_radix(text, 16).map_err(|_| CandumpError::IdRange(text.to_owned()))?;
+    // can-utils writes 11-bit IDs with 3 digits and 29-bit IDs with 8.
+    let extended = text.len() > 3;
+    if (extended && id > 0x1FFF_FFFF) || (!extended && id > 0x7FF) {
+        return Err(CandumpError::IdRange(text.to_owned()));
+    }
+    Ok((id, extended))
+}
+
+fn parse_hex_bytes(text: &str) -> Result<Vec<u8>, CandumpError> {
+    let clean: String = text.chars().filter(|c| *c != '.').collect();
+    if clean.len() % 2 != 0 || !clean.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(CandumpError::BadData(text.to_owned()));
+    }
+    let bytes: Vec<u8> = (0..clean.len())
+        .step_by(2)
+        .filter_map(|i| u8::from_str_radix(&clean[i..i + 2], 16).ok())
+        .collect();
+    if bytes.len() > 8 {
+        return Err(CandumpError::TooLong(bytes.len()));
+    }
+    Ok(bytes)
+}
+
+/// Parse `ID#DATA` (cansend and `candump -l` form).
+pub fn parse_compact(frame: &str) -> Result<(u32, bool, bool, Vec<u8>), CandumpError> {
+    let Some((id, data)) = frame.split_once('#') else {
+        return Err(CandumpError::MissingFrame);
+    };
+    if data.starts_with('#') {
+        return Err(CandumpError::CanFd(frame.to_owned()));
+    }
+    let (id, extended) = parse_id(id)?;
+    if data.starts_with(['R', 'r']) {
+        // `R` or `R<dlc>`: a remote request.
+        return Ok((id, extended, true, Vec::new()));
+    }
+    Ok((id, extended, false, parse_hex_bytes(data)?))
+}
+
+/// Parse one line in any of the supported forms.
+pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
+    let mut rest = line.trim();
+    if rest.is_empty() {
+        return Err(CandumpError::Empty);
+    }
+    let mut timestamp = None;
+    if let Some(after) = rest.strip_prefix('(') {
+        let (ts, tail) = after.split_once(')').ok_or(CandumpError::Timestamp)?;
+        timestamp = Some(ts.trim().to_owned());
+        rest = tail.trim_start();
+    }
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    match fields.as_slice() {
+        [] => Err(CandumpError::MissingFrame),
+        // `ID#DATA` alone (cansend form).
+        [frame] if frame.contains('#') => {
+            let (id, extended, remote, data) = parse_compact(frame)?;
+            Ok(TextFrame {
+                timestamp,
+                interface: None,
+                id,
+                extended,
+                remote,
+                data,
+            })
+        }
+        // `iface ID#DATA [flags]` (candump -l).
+        [iface, frame, ..] if frame.contains('#') => {
+            let (id, extended, remote, data) = parse_compact(frame)?;
+            Ok(TextFrame {
+                timestamp,
+                interface: Some((*iface).to_owned()),
+                id,
+                extended,
+                remote,
+                data,
+            })
+        }
+        // `iface ID [len] bytes...` (plain candump).
+        [iface, id, len, bytes @ ..] => {
+            let (id, extended) = parse_id(id)?;
+            let declared = len
+                .strip_prefix('[')
+                .and_then(|l| l.strip_suffix(']'))
+                .and_then(|l| l.parse::<usize>().ok())
+                .filter(|l| *l <= 8)
+                .ok_or_else(|| CandumpError::BadLength((*len).to_owned()))?;
+            let remote = bytes.first().is_some_and(|b| *b == "remote");
+            let data = if remote {
+                Vec::new()
+            } else {
+                parse_hex_bytes(&bytes.concat())?
+            };
+            if !remote && data.len() != declared {
+                return Err(CandumpError::LengthMismatch {
+                    declared,
+                    found: data.len(),
+                });
+            }
+            Ok(TextFrame {
+                timestamp,
+                interface: Some((*iface).to_owned()),
+                id,
+                extended,
+                remote,
+                data,
+            })
+        }
+        _ => Err(CandumpError::MissingFrame),
+    }
+}
+
+/// `ID#DATA` as cansend takes it.
+#[derive(Debug, Clone, Copy)]
+pub struct Compact<'a> {
+    pub id: u32,
+    pub extended: bool,
+    pub data: &'a [u8],
+}
+
+impl fmt::Display for Compact<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.extended {
+            write!(f, "{:08X}#", self.id)?;
+        } else {
+            write!(f, "{:03X}#", self.id)?;
+        }
+        for b in self.data {
+            write!(f, "{b:02X}")?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_form() {
+        let f = parse_line("(1700000000.123456) vcan0 100#0102030405060708").unwrap();
+        assert_eq!(f.timestamp.as_deref(), Some("1700000000.123456"));
+        assert_eq!(f.interface.as_deref(), Some("vcan0"));
+        assert_eq!((f.id, f.extended, f.remote), (0x100, false, false));
+        assert_eq!(f.data, vec![1, 2, 3, 4, 5, 6, 7, 8]);
+    }
+
+    #[test]
+    fn plain_form_with_and_without_timestamp() {
+        let a = parse_line("  vcan0  101   [8]  01 02 03 04 05 06 07 08").unwrap();
+        let b = parse_line(" (1700000000.5)  vcan0  101   [8]  01 02 03 04 05 06 07 08").unwrap();
+        assert_eq!(a.id, 0x101);
+        assert_eq!(a.data, b.data);
+        assert_eq!(b.timestamp.as_deref(), Some("1700000000.5"));
+    }
+
+    #[test]
+    fn extended_and_remote() {
+        let f = parse_line("vcan0 12345678#R").unwrap();
+        assert!(f.extended && f.remote);
+        let g = parse_line("  vcan0  080   [8]  remote request").unwrap();
+        assert!(g.remote && !g.extended);
+    }
+
+    #[test]
+    fn cansend_form() {
+        let f = parse_line("110#00112233445566").unwrap();
+        assert_eq!(f.interface, None);
+        assert_eq!(f.data.len(), 7);
+    }
+
+    #[test]
+    fn malformed_lines_name_the_problem() {
+        assert_eq!(parse_line("   "), Err(CandumpError::Empty));
+        assert_eq!(
+            parse_line("vcan0 1G0#00"),
+            Err(CandumpError::BadId("1G0".into()))
+        );
+        assert_eq!(
+            parse_line("vcan0 100#0"),
+            Err(CandumpError::BadData("0".into()))
+        );
+        assert_eq!(
+            parse_line("vcan0 800#00"),
+            Err(CandumpError::IdRange("800".into()))
+        );
+        assert!(matches!(
+            parse_line("vcan0 100##100"),
+            Err(CandumpError::CanFd(_))
+        ));
+        assert_eq!(
+            parse_line("vcan0 100 [8] 01 02"),
+            Err(CandumpError::LengthMismatch {
+                declared: 8,
+                found: 2
+            })
+        );
+        assert_eq!(parse_line("(123 vcan0"), Err(CandumpError::Timestamp));
+        assert_eq!(
+            parse_line("vcan0 100#001122334455667788"),
+            Err(CandumpError::TooLong(9))
+        );
+    }
+
+    #[test]
+    fn compact_round_trip() {
+        let data = [0xDE, 0xAD, 0xBE, 0xEF];
+        let text = Compact {
+            id: 0x1F,
+            extended: false,
+            data: &data,
+        }
+        .to_string();
+        assert_eq!(text, "01F#DEADBEEF");
+        assert_eq!(
+            parse_compact(&text).unwrap(),
+            (0x1F, false, false, data.to_vec())
+        );
+    }
+}
