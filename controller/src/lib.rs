@@ -1,0 +1,3 @@
+//! The golf car's navigation firmware (the seed paper's navigation system).
+
+pub mod planner;

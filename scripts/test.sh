@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The test command (README.md): installs what the tests need, builds the workspace and
+# runs every test. Tests that need a real vcan (test binaries named vcan_*) run natively
+# when this kernel has vcan and we may create interfaces, otherwise inside a throwaway
+# VM (vcan-setup vm) whose stock kernel has CAN. Either way they run: a missing vcan
+# fails them loudly, it never skips them.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+bash scripts/install-deps.sh
+source scripts/env.sh
+
+cargo build --workspace --all-targets --locked
+
+echo "== tests on the host (everything but vcan_*)"
+cargo nextest run --workspace --locked --no-fail-fast -E 'not binary(/^vcan_/)'
+
+echo "== tests on a real vcan (vcan_*)"
+vcan_tests=(cargo nextest run --workspace --locked --no-fail-fast -E 'binary(/^vcan_/)')
+if target/debug/vcan-setup status >/dev/null 2>&1 && [[ $(id -u) -eq 0 ]]; then
+    "${vcan_tests[@]}"
+else
+    target/debug/vcan-setup status || true
+    target/debug/vcan-setup vm -- "${vcan_tests[@]}"
+fi

@@ -1,0 +1,361 @@
+//! Run a command inside a throwaway VM whose stock distribution kernel has CAN.
+//!
+//! virtme-ng (`vng`) boots the kernel under QEMU with the host's root filesystem
+//! shared read-only, the working directory writable (`--rwdir`), and the same working
+//! directory. Inside, this same binary (`vcan-setup vm-guest`) brings up the vcan
+//! interfaces and runs the command; its exit code is written to a host directory
+//! shared with the guest, so a VM that failed to boot is told apart from a command
+//! that failed.
+//!
+//! Quirks of vng handled here: stdin must be open (it is /dev/null), stdout and
+//! stderr must be pipes (QEMU reopens file descriptors with truncation), and the
+//! guest does not inherit the environment (the toolchain's variables are passed).
+
+use std::ffi::OsString;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use crate::VcanError;
+
+/// How to install the prerequisites on Debian/Ubuntu.
+pub const INSTALL_HINT: &str = "bash scripts/install-deps.sh installs all of it; by hand: apt-get install linux-image-amd64 qemu-system-x86 busybox-static can-utils, pip install virtme-ng";
+
+/// Environment variables passed into the guest (exact names, or prefixes ending in `*`).
+const PASS_ENV: &[&str] = &[
+    "PATH",
+    "HOME",
+    "USER",
+    "LANG",
+    "LC_*",
+    "TERM",
+    "CARGO*",
+    "RUST*",
+    "NEXTEST*",
+    "CI",
+    "PYENV*",
+    "PYTHON*",
+    "VIRTUAL_ENV",
+    "UGV_*",
+];
+
+/// Whether to use KVM.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Accel {
+    /// KVM when /dev/kvm is usable, falling back to software emulation if the VM
+    /// does not come up with it.
+    Auto,
+    /// Hardware virtualisation only.
+    Kvm,
+    /// Software emulation (QEMU TCG): slower, works everywhere.
+    Tcg,
+}
+
+/// Arguments of `vcan-setup vm`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct VmArgs {
+    /// Kernel image to boot; default: the newest /boot/vmlinuz-* that has a vcan module.
+    #[arg(long, value_name = "VMLINUZ")]
+    pub kernel: Option<PathBuf>,
+    /// CAN interfaces to create and bring up inside (vcan0 always).
+    #[arg(long = "iface", value_name = "NAME")]
+    pub ifaces: Vec<String>,
+    /// Guest memory.
+    #[arg(long, default_value = "2G")]
+    pub memory: String,
+    /// Guest CPUs; default: as many as the host has.
+    #[arg(long)]
+    pub cpus: Option<usize>,
+    /// Further host directories the guest may write (the working directory always).
+    #[arg(long, value_name = "DIR")]
+    pub rwdir: Vec<PathBuf>,
+    /// Hardware virtualisation.
+    #[arg(long, value_enum, default_value_t = Accel::Auto)]
+    pub accel: Accel,
+    /// The command and its arguments.
+    #[arg(last = true, required = true, value_name = "CMD")]
+    pub command: Vec<OsString>,
+}
+
+/// Arguments of the hidden `vcan-setup vm-guest` (what runs inside the VM).
+#[derive(Debug, Clone, clap::Args)]
+pub struct GuestArgs {
+    #[arg(long = "iface", value_name = "NAME")]
+    pub ifaces: Vec<String>,
+    /// Host directory (shared) to write the exit code into.
+    #[arg(long)]
+    pub status_dir: PathBuf,
+    #[arg(long)]
+    pub cwd: PathBuf,
+    #[arg(last = true, required = true)]
+    pub command: Vec<OsString>,
+}
+
+fn find_in_path(tool: &str) -> Option<PathBuf> {
+    std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|p| p.join(tool))
+            .find(|p| p.is_file())
+    })
+}
+
+fn missing(tool: &str, package: &str) -> VcanError {
+    VcanError::Vm(format!(
+        "{tool} not found on PATH: install {package} ({INSTALL_HINT})"
+    ))
+}
+
+/// The newest installed kernel image whose modules include vcan.
+pub fn default_kernel() -> Result<PathBuf, VcanError> {
+    let mut candidates: Vec<(String, PathBuf)> = std::fs::read_dir("/boot")
+        .map_err(|source| VcanError::Io {
+            what: "listing /boot".to_owned(),
+            source,
+        })?
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let release = name.strip_prefix("vmlinuz-")?.to_owned();
+            let modules = PathBuf::from("/lib/modules").join(&release);
+            crate::find_module(&modules.join("kernel/drivers/net/can"), "vcan")?;
+            Some((release, e.path()))
+        })
+        .collect();
+    candidates.sort_by(|a, b| version_key(&a.0).cmp(&version_key(&b.0)));
+    candidates.pop().map(|(_, p)| p).ok_or_else(|| {
+        VcanError::Vm(format!(
+            "no kernel image in /boot with a vcan module under /lib/modules: install linux-image-amd64 ({INSTALL_HINT})"
+        ))
+    })
+}
+
+/// "6.1.0-56-amd64" -> [6, 1, 0, 56]: numeric parts for ordering releases.
+fn version_key(release: &str) -> Vec<u64> {
+    release
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|p| p.parse().ok())
+        .collect()
+}
+
+fn kvm_usable() -> bool {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open("/dev/kvm")
+        .is_ok()
+}
+
+fn guest_env() -> Vec<OsString> {
+    std::env::vars_os()
+        .filter(|(k, v)| {
+            let k = k.to_string_lossy();
+            let v = v.to_string_lossy();
+            !v.contains('\n')
+                && PASS_ENV.iter().any(|p| match p.strip_suffix('*') {
+                    Some(prefix) => k.starts_with(prefix),
+                    None => k == *p,
+                })
+        })
+        .map(|(k, v)| {
+            let mut kv = k;
+            kv.push("=");
+            kv.push(v);
+            kv
+        })
+        .collect()
+}
+
+/// Copy a child's pipe to ours as it comes.
+fn forward(mut from: impl Read + Send + 'static, to_stderr: bool) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 8192];
+        while let Ok(n) = from.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            let written = if to_stderr {
+                std::io::stderr().write_all(&buf[..n])
+            } else {
+                std::io::stdout().write_all(&buf[..n])
+            };
+            if written.is_err() {
+                break;
+            }
+        }
+    })
+}
+
+/// One boot: `Ok(Some(code))` when the guest ran the command, `Ok(None)` when the VM
+/// did not get that far.
+fn boot(
+    args: &VmArgs,
+    vng: &Path,
+    kernel: &Path,
+    kvm: bool,
+    status_dir: &Path,
+) -> Result<Option<u8>, VcanError> {
+    let cwd = std::env::current_dir().map_err(|source| VcanError::Io {
+        what: "reading the working directory".to_owned(),
+        source,
+    })?;
+    let me = std::env::current_exe().map_err(|source| VcanError::Io {
+        what: "locating vcan-setup itself".to_owned(),
+        source,
+    })?;
+    let mut cmd = Command::new(vng);
+    cmd.arg("--run").arg(kernel);
+    if !kvm {
+        cmd.arg("--disable-kvm");
+    }
+    cmd.args(["--memory", &args.memory]);
+    let cpus = args
+        .cpus
+        .or_else(|| std::thread::available_parallelism().ok().map(|n| n.get()))
+        .unwrap_or(1);
+    cmd.args(["--cpus", &cpus.to_string()]);
+    for dir in std::iter::once(&cwd)
+        .chain(&args.rwdir)
+        .chain(std::iter::once(&status_dir.to_path_buf()))
+    {
+        cmd.arg("--rwdir").arg(dir);
+    }
+    cmd.arg("--")
+        .arg("env")
+        .args(guest_env())
+        .arg(me)
+        .arg("vm-guest");
+    let mut ifaces = vec!["vcan0".to_owned()];
+    ifaces.extend(args.ifaces.iter().filter(|i| *i != "vcan0").cloned());
+    for iface in &ifaces {
+        cmd.args(["--iface", iface]);
+    }
+    cmd.arg("--status-dir")
+        .arg(status_dir)
+        .arg("--cwd")
+        .arg(&cwd)
+        .arg("--")
+        .args(&args.command);
+    // vng's own bin directory must be on PATH (it executes virtme-run beside it).
+    if let Some(dir) = vng.parent() {
+        let mut paths = vec![dir.to_path_buf()];
+        if let Some(p) = std::env::var_os("PATH") {
+            paths.extend(std::env::split_paths(&p));
+        }
+        if let Ok(joined) = std::env::join_paths(paths) {
+            cmd.env("PATH", joined);
+        }
+    }
+    cmd.stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut child = cmd.spawn().map_err(|source| VcanError::Io {
+        what: format!("starting {}", vng.display()),
+        source,
+    })?;
+    let out = child.stdout.take().map(|o| forward(o, false));
+    let err = child.stderr.take().map(|e| forward(e, true));
+    let status = child.wait().map_err(|source| VcanError::Io {
+        what: "waiting for the VM".to_owned(),
+        source,
+    })?;
+    for handle in [out, err].into_iter().flatten() {
+        let _ = handle.join();
+    }
+    let recorded = std::fs::read_to_string(status_dir.join("exit-code"))
+        .ok()
+        .and_then(|s| s.trim().parse::<u8>().ok());
+    if recorded.is_none() {
+        eprintln!(
+            "vcan-setup: the VM exited ({status}) without running the command{}",
+            if kvm { " (with KVM)" } else { "" }
+        );
+    }
+    Ok(recorded)
+}
+
+/// Boot the VM, run the command inside, and return its exit code.
+pub fn run(args: &VmArgs) -> Result<u8, VcanError> {
+    let vng = find_in_path("vng").ok_or_else(|| missing("vng", "virtme-ng (pip)"))?;
+    find_in_path("qemu-system-x86_64")
+        .ok_or_else(|| missing("qemu-system-x86_64", "qemu-system-x86"))?;
+    find_in_path("busybox").ok_or_else(|| missing("busybox", "busybox-static"))?;
+    let kernel = match &args.kernel {
+        Some(k) if k.is_file() => k.clone(),
+        Some(k) => {
+            return Err(VcanError::Vm(format!(
+                "kernel image {} does not exist",
+                k.display()
+            )));
+        }
+        None => default_kernel()?,
+    };
+    let status_dir = std::env::temp_dir().join(format!("vcan-setup-vm-{}", std::process::id()));
+    std::fs::create_dir_all(&status_dir).map_err(|source| VcanError::Io {
+        what: format!("creating {}", status_dir.display()),
+        source,
+    })?;
+    let attempts: &[bool] = match args.accel {
+        Accel::Kvm => &[true],
+        Accel::Tcg => &[false],
+        Accel::Auto if kvm_usable() => &[true, false],
+        Accel::Auto => &[false],
+    };
+    let started = Instant::now();
+    let mut result = None;
+    for &kvm in attempts {
+        result = boot(args, &vng, &kernel, kvm, &status_dir)?;
+        if result.is_some() {
+            break;
+        }
+    }
+    let _ = std::fs::remove_dir_all(&status_dir);
+    match result {
+        Some(code) => {
+            eprintln!(
+                "vcan-setup: VM ({}) finished in {:.1} s, command exit code {code}",
+                kernel.display(),
+                started.elapsed().as_secs_f64()
+            );
+            Ok(code)
+        }
+        None => Err(VcanError::Vm(format!(
+            "the VM booted from {} did not run the command; see its output above",
+            kernel.display()
+        ))),
+    }
+}
+
+/// Inside the VM: bring up the interfaces, run the command, record its exit code.
+pub fn guest(args: &GuestArgs) -> Result<u8, VcanError> {
+    for iface in &args.ifaces {
+        crate::up(iface)?;
+    }
+    let Some((program, rest)) = args.command.split_first() else {
+        return Err(VcanError::Vm("no command to run in the VM".to_owned()));
+    };
+    let status = Command::new(program)
+        .args(rest)
+        .current_dir(&args.cwd)
+        .status()
+        .map_err(|source| VcanError::Io {
+            what: format!("running {program:?} in the VM"),
+            source,
+        })?;
+    // A command killed by a signal reports 128 + signal, as a shell would.
+    let code = status.code().map_or_else(
+        || {
+            use std::os::unix::process::ExitStatusExt;
+            128 + status.signal().unwrap_or(0)
+        },
+        |c| c,
+    );
+    let code = u8::try_from(code).unwrap_or(1);
+    std::fs::write(args.status_dir.join("exit-code"), code.to_string()).map_err(|source| {
+        VcanError::Io {
+            what: format!("writing the exit code to {}", args.status_dir.display()),
+            source,
+        }
+    })?;
+    Ok(code)
+}
