@@ -392,6 +392,14 @@ fn generate(net: &NetworkSpec) -> Result<String> {
     )?;
     writeln!(
         o,
+        "    /// The DBC name.\n    pub fn name(&self) -> &'static str {{ match self {{"
+    )?;
+    for m in net.messages.iter() {
+        writeln!(o, "        Self::{}(_) => {:?},", camel(&m.name), m.name)?;
+    }
+    writeln!(o, "    }} }}")?;
+    writeln!(
+        o,
         "    /// The CAN ID.\n    pub fn id(&self) -> u16 {{ match self {{"
     )?;
     for m in net.messages.iter() {

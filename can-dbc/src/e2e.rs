@@ -188,16 +188,30 @@ impl E2eStats {
     }
 }
 
-/// The receiver side: the last accepted counter per ID and the rejection counts.
+/// The receiver side: the last accepted counter per sender of each ID and the
+/// rejection counts.
 ///
-/// A skipped counter is rejected and counted, and the receiver re-synchronises on it,
-/// so the frame after it is accepted again; a repeated counter or a bad CRC leaves
-/// the state as it was.
+/// A message that several nodes send (FAULT_REPORT) carries its sender in a `Source`
+/// signal, and each sender keeps its own counter, so the receiver tracks one counter
+/// per (ID, Source). A skipped counter is rejected and counted, and the receiver
+/// re-synchronises on it, so the frame after it is accepted again; a repeated counter
+/// or a bad CRC leaves the state as it was.
 #[derive(Debug, Clone)]
 pub struct E2eRx<'n> {
     network: &'n NetworkSpec,
-    last: BTreeMap<u16, u8>,
+    last: BTreeMap<(u16, i128), u8>,
     stats: E2eStats,
+}
+
+/// Which sender's counter a frame continues: the `Source` signal of a message with
+/// several senders, 0 otherwise.
+fn sender_key(network: &NetworkSpec, id: u16, data: &[u8]) -> i128 {
+    network
+        .message(id)
+        .filter(|m| m.senders.len() > 1)
+        .and_then(|m| m.signal("Source"))
+        .zip(Payload::try_from(data).ok())
+        .map_or(0, |(s, p)| s.get_raw(&p))
 }
 
 impl<'n> E2eRx<'n> {
@@ -217,19 +231,20 @@ impl<'n> E2eRx<'n> {
         remote: bool,
         data: &[u8],
     ) -> Result<(u16, Payload), E2eError> {
-        let last = u16::try_from(id)
+        let key = u16::try_from(id)
             .ok()
             .filter(|_| !extended)
-            .and_then(|id| self.last.get(&id).copied());
+            .map(|id| (id, sender_key(self.network, id, data)));
+        let last = key.and_then(|k| self.last.get(&k).copied());
         let result = check(self.network, id, extended, remote, data, last);
-        match &result {
-            Ok((id, payload)) => {
-                self.last.insert(*id, counter_of(payload));
+        match (&result, key) {
+            (Ok((_, payload)), Some(k)) => {
+                self.last.insert(k, counter_of(payload));
             }
-            Err(E2eError::SkippedCounter { id, found, .. }) => {
-                self.last.insert(*id, *found);
+            (Err(E2eError::SkippedCounter { found, .. }), Some(k)) => {
+                self.last.insert(k, *found);
             }
-            Err(_) => {}
+            _ => {}
         }
         self.stats.count(&result);
         result

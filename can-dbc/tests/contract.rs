@@ -494,3 +494,33 @@ fn malformed_dbc_is_refused_with_a_clear_error() {
     let err = NetworkSpec::from_dbc(&dup).unwrap_err().to_string();
     assert!(err.contains("defined twice"), "{err}");
 }
+
+#[test]
+fn fault_reports_from_several_senders_keep_separate_counters() {
+    let mut steering_tx = E2eTx::new();
+    let mut throttle_tx = E2eTx::new();
+    let mut rx = E2eRx::new(&NETWORK);
+    let report = |source| FaultReport {
+        source,
+        code: FaultReportCode::CommandTimeout,
+        detail: 0x100,
+    };
+    for _ in 0..20 {
+        let a = steering_tx
+            .seal_message(&report(FaultReportSource::SteeringEcu))
+            .unwrap();
+        let b = throttle_tx
+            .seal_message(&report(FaultReportSource::ThrottleEcu))
+            .unwrap();
+        assert!(rx.accept_parts(0xF0, false, false, &a).is_ok());
+        assert!(rx.accept_parts(0xF0, false, false, &b).is_ok());
+    }
+    // A replay within one sender's stream is still caught.
+    let again = {
+        let mut tx = E2eTx::new();
+        tx.seal_message(&report(FaultReportSource::SteeringEcu))
+            .unwrap()
+    };
+    assert!(rx.accept_parts(0xF0, false, false, &again).is_err());
+    assert_eq!(rx.stats().accepted, 40);
+}

@@ -1,17 +1,24 @@
-//! A SocketCAN endpoint speaking golf_car.dbc: typed messages out with the E2E
-//! counter and CRC filled in, frames in checked for E2E and decoded.
+//! A CAN endpoint speaking golf_car.dbc: typed messages out with the E2E counter and
+//! CRC filled in, frames in checked for E2E and decoded.
 //!
-//! The same endpoint serves vcan0 (simulated devices) and can0 or a USB adapter
-//! (physical ones): the controller never knows which.
+//! Generic over the ecosystem's non-blocking bus trait (`embedded_can::nb::Can`): a
+//! SocketCAN socket on vcan0 (simulated devices) or can0 / a USB adapter (physical
+//! ones) in HIL, or the in-memory bus of [`membus`] in SIL. The controller never knows
+//! which.
+
+pub mod membus;
 
 use std::io;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use embedded_can::{Frame, Id, StandardId};
 use golf_car_can::{
     CanMessage, CodecError, E2eError, E2eRx, E2eStats, E2eTx, GolfCarMessage, NETWORK, Payload,
 };
-use socketcan::{CanFrame, CanSocket, Socket};
+use socketcan::{CanSocket, Socket};
+
+/// How long a send retries a full transmit queue before giving up.
+const TX_RETRY: Duration = Duration::from_millis(20);
 
 /// Errors of the CAN endpoint.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +33,8 @@ pub enum BridgeError {
         #[source]
         source: io::Error,
     },
+    #[error("CAN bus {iface}: {detail}")]
+    Bus { iface: String, detail: String },
     #[error("encoding {message}: {source}")]
     Encode {
         message: &'static str,
@@ -45,51 +54,40 @@ pub enum Received {
     Rejected(E2eError),
     /// A frame that passed E2E but whose signals do not decode (a value outside its table).
     Undecodable { id: u16, error: CodecError },
-    /// A CAN error frame from the controller.
-    ErrorFrame(String),
+    /// An error reported by the bus (a CAN error frame, an overrun).
+    BusError(String),
 }
 
-/// A SocketCAN endpoint on one interface.
+/// A golf_car.dbc endpoint on one bus.
 #[derive(Debug)]
-pub struct CanPort {
-    iface: String,
-    socket: CanSocket,
+pub struct CanPort<B = CanSocket> {
+    name: String,
+    bus: B,
     tx: E2eTx,
     rx: E2eRx<'static>,
     undecodable: u64,
+    bus_errors: u64,
 }
 
-impl CanPort {
-    /// Open a raw CAN socket on `iface` (vcan0, can0, ...).
-    pub fn open(iface: &str) -> Result<Self, BridgeError> {
-        let socket = CanSocket::open(iface).map_err(|source| match source.raw_os_error() {
-            Some(libc::ENODEV) => BridgeError::NoInterface {
-                iface: iface.to_owned(),
-            },
-            _ => BridgeError::Io {
-                iface: iface.to_owned(),
-                source,
-            },
-        })?;
-        Ok(Self {
-            iface: iface.to_owned(),
-            socket,
+impl<B> CanPort<B>
+where
+    B: embedded_can::nb::Can,
+{
+    /// Wrap a bus; `name` names it in errors (the interface name).
+    pub fn new(bus: B, name: &str) -> Self {
+        CanPort {
+            name: name.to_owned(),
+            bus,
             tx: E2eTx::new(),
             rx: E2eRx::new(&NETWORK),
             undecodable: 0,
-        })
+            bus_errors: 0,
+        }
     }
 
     /// The interface name.
     pub fn iface(&self) -> &str {
-        &self.iface
-    }
-
-    fn io(&self, source: io::Error) -> BridgeError {
-        BridgeError::Io {
-            iface: self.iface.clone(),
-            source,
-        }
+        &self.name
     }
 
     /// Send a typed message, protected with the ID's next counter and the CRC.
@@ -104,43 +102,65 @@ impl CanPort {
         self.send_payload(M::ID, &data)
     }
 
-    /// Send a payload exactly as given (no E2E added): for gateways and fault injection.
-    pub fn send_payload(&self, id: u16, data: &Payload) -> Result<(), BridgeError> {
-        let sid = StandardId::new(id).ok_or(BridgeError::BadId { id })?;
-        let frame = CanFrame::new(sid, data).ok_or(BridgeError::BadId { id })?;
-        self.socket
-            .write_frame_insist(&frame)
-            .map_err(|e| self.io(e))
+    /// Send any message of the network.
+    pub fn send_message(&mut self, message: &GolfCarMessage) -> Result<(), BridgeError> {
+        let id = message.id();
+        let data = message.encode().map_err(|source| BridgeError::Encode {
+            message: message.name(),
+            source,
+        })?;
+        let sealed = self.tx.seal(id, data);
+        self.send_payload(id, &sealed)
     }
 
-    /// Wait up to `timeout` for a frame; `None` when none came.
-    pub fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, BridgeError> {
-        let frame = match self.socket.read_frame_timeout(timeout) {
-            Ok(frame) => frame,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                ) =>
-            {
-                return Ok(None);
+    /// Send a payload exactly as given (no E2E added): for gateways and fault injection.
+    pub fn send_payload(&mut self, id: u16, data: &Payload) -> Result<(), BridgeError> {
+        let sid = StandardId::new(id).ok_or(BridgeError::BadId { id })?;
+        let frame = B::Frame::new(sid, data).ok_or(BridgeError::BadId { id })?;
+        let started = Instant::now();
+        loop {
+            match self.bus.transmit(&frame) {
+                Ok(_) => return Ok(()),
+                Err(nb::Error::WouldBlock) if started.elapsed() < TX_RETRY => {
+                    std::thread::sleep(Duration::from_micros(200));
+                }
+                Err(nb::Error::WouldBlock) => {
+                    return Err(BridgeError::Bus {
+                        iface: self.name.clone(),
+                        detail: format!("transmit queue full for {TX_RETRY:?}"),
+                    });
+                }
+                Err(nb::Error::Other(e)) => {
+                    return Err(BridgeError::Bus {
+                        iface: self.name.clone(),
+                        detail: format!("{e:?}"),
+                    });
+                }
             }
-            Err(e) => return Err(self.io(e)),
-        };
-        if let CanFrame::Error(err) = &frame {
-            return Ok(Some(Received::ErrorFrame(format!(
-                "{:?}",
-                err.into_error()
-            ))));
         }
+    }
+
+    /// The next frame if one is waiting (never blocks).
+    pub fn try_recv(&mut self) -> Option<Received> {
+        match self.bus.receive() {
+            Ok(frame) => Some(self.classify(&frame)),
+            Err(nb::Error::WouldBlock) => None,
+            Err(nb::Error::Other(e)) => {
+                self.bus_errors += 1;
+                Some(Received::BusError(format!("{e:?}")))
+            }
+        }
+    }
+
+    fn classify(&mut self, frame: &B::Frame) -> Received {
         let (id, extended) = match frame.id() {
             Id::Standard(id) => (u32::from(id.as_raw()), false),
             Id::Extended(id) => (id.as_raw(), true),
         };
-        let checked = self
+        match self
             .rx
-            .accept_parts(id, extended, frame.is_remote_frame(), frame.data());
-        Ok(Some(match checked {
+            .accept_parts(id, extended, frame.is_remote_frame(), frame.data())
+        {
             Err(e) => Received::Rejected(e),
             Ok((id, payload)) => match GolfCarMessage::decode(id, &payload) {
                 Ok(m) => Received::Message(m),
@@ -149,7 +169,7 @@ impl CanPort {
                     Received::Undecodable { id, error }
                 }
             },
-        }))
+        }
     }
 
     /// The receiver's E2E statistics.
@@ -160,5 +180,65 @@ impl CanPort {
     /// Frames that passed E2E but did not decode.
     pub fn undecodable(&self) -> u64 {
         self.undecodable
+    }
+
+    /// Errors the bus reported.
+    pub fn bus_errors(&self) -> u64 {
+        self.bus_errors
+    }
+}
+
+impl CanPort<CanSocket> {
+    /// Open a raw CAN socket on `iface` (vcan0, can0, ...).
+    pub fn open(iface: &str) -> Result<Self, BridgeError> {
+        let io = |source: io::Error| match source.raw_os_error() {
+            Some(libc::ENODEV) => BridgeError::NoInterface {
+                iface: iface.to_owned(),
+            },
+            _ => BridgeError::Io {
+                iface: iface.to_owned(),
+                source,
+            },
+        };
+        let socket = CanSocket::open(iface).map_err(io)?;
+        socket.set_nonblocking(true).map_err(io)?;
+        Ok(CanPort::new(socket, iface))
+    }
+
+    /// Wait up to `timeout` for a frame (woken by the socket, not polling); `None`
+    /// when none came.
+    pub fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, BridgeError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(r) = self.try_recv() {
+                return Ok(Some(r));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            match self.bus.read_frame_timeout(left) {
+                Ok(frame) => {
+                    return Ok(Some(match frame {
+                        socketcan::CanFrame::Error(e) => {
+                            self.bus_errors += 1;
+                            Received::BusError(format!("{:?}", e.into_error()))
+                        }
+                        other => self.classify(&other),
+                    }));
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                    ) => {}
+                Err(source) => {
+                    return Err(BridgeError::Io {
+                        iface: self.name.clone(),
+                        source,
+                    });
+                }
+            }
+        }
     }
 }

@@ -3,7 +3,13 @@
 //! side knowing.
 //!
 //! - [`can`]: a SocketCAN endpoint that speaks golf_car.dbc with E2E protection.
+//! - [`nmea`]: the GPS wire, NMEA 0183 writer and reader, serial and pty endpoints.
+//! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
 
 pub mod can;
+pub mod geodesy;
+pub mod nmea;
 
 pub use can::{BridgeError, CanPort, Received};
+pub use geodesy::{Enu, Geodetic, LocalFrame};
+pub use nmea::{GpsFix, GpsReading, NmeaError, NmeaReader, NmeaWriter};

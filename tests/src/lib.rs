@@ -1,5 +1,6 @@
 //! Helpers shared by the end-to-end tests.
 
+use std::path::PathBuf;
 use std::process::{Command, Output};
 
 /// A vcan interface of the test's own, deleted on drop, so tests run in parallel.
@@ -40,4 +41,21 @@ pub fn can_utils(tool: &str, args: &[&str]) -> anyhow::Result<Output> {
             "running {tool} (Debian package can-utils, see scripts/install-deps.sh): {e}"
         )
     })
+}
+
+/// A binary of the workspace, built by `cargo build --workspace` beside this test
+/// (target/<profile>/NAME).
+pub fn workspace_bin(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    // target/<profile>/deps/<test>-<hash>
+    let dir = exe.parent().and_then(|deps| deps.parent()).ok_or_else(|| {
+        anyhow::anyhow!("cannot locate the target directory from {}", exe.display())
+    })?;
+    let bin = dir.join(name);
+    anyhow::ensure!(
+        bin.is_file(),
+        "{} is missing: build the workspace first (cargo build --workspace)",
+        bin.display()
+    );
+    Ok(bin)
 }

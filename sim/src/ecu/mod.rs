@@ -1,0 +1,175 @@
+//! The simulated actuator ECUs as CAN nodes: each reacts to the frames it receives,
+//! moves its actuator, and says when its report and its fault reports are due. The
+//! same node runs on a SocketCAN interface (HIL) or in lockstep (SIL).
+
+pub mod safety;
+pub mod steering;
+pub mod throttle;
+
+use golf_car_can::{
+    CanMessage, FaultReport, FaultReportSource, GolfCarMessage, NETWORK, SteeringReport,
+    ThrottleReport,
+};
+
+use crate::scenario::Scenario;
+use safety::{Safety, SafetyTiming};
+pub use steering::SteeringEcu;
+pub use throttle::ThrottleEcu;
+
+/// The period of a message from the DBC, seconds.
+pub fn period_of<M: CanMessage>() -> f64 {
+    f64::from(M::spec().cycle_time_ms.unwrap_or(10)) / 1000.0
+}
+
+/// The watchdog timing from the DBC's receiver timeouts and the scenario.
+pub fn safety_timing(scenario: &Scenario, command: u16) -> SafetyTiming {
+    let timeout = |id: u16| {
+        NETWORK
+            .message(id)
+            .and_then(|m| m.timeout_ms)
+            .map_or(0.1, |ms| f64::from(ms) / 1000.0)
+    };
+    SafetyTiming {
+        command_timeout: timeout(command),
+        heartbeat_timeout: timeout(golf_car_can::ControllerHeartbeat::ID),
+        fault_clear: f64::from(scenario.can.fault_clear_ms) / 1000.0,
+    }
+}
+
+/// Which ECU a node is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EcuKind {
+    Steering,
+    Throttle,
+}
+
+/// A simulated ECU on the bus.
+#[derive(Clone, Debug)]
+pub enum Ecu {
+    Steering(SteeringEcu),
+    Throttle(ThrottleEcu),
+}
+
+/// One ECU node with its send schedule.
+#[derive(Clone, Debug)]
+pub struct EcuNode {
+    pub ecu: Ecu,
+    next_report: f64,
+    next_fault: f64,
+    /// Frames the node ignored (not addressed to it: other reports, its own kind).
+    pub ignored: u64,
+}
+
+impl EcuNode {
+    pub fn new(kind: EcuKind, scenario: &Scenario) -> EcuNode {
+        let ecu = match kind {
+            EcuKind::Steering => Ecu::Steering(SteeringEcu::new(
+                scenario.steering.clone(),
+                scenario.vehicle.max_steer_deg,
+                Safety::new(safety_timing(scenario, golf_car_can::SteeringCmd::ID)),
+            )),
+            EcuKind::Throttle => Ecu::Throttle(ThrottleEcu::new(
+                scenario.throttle.clone(),
+                scenario.vehicle.max_speed,
+                Safety::new(safety_timing(scenario, golf_car_can::ThrottleCmd::ID)),
+            )),
+        };
+        EcuNode {
+            ecu,
+            next_report: 0.0,
+            next_fault: 0.0,
+            ignored: 0,
+        }
+    }
+
+    pub fn kind(&self) -> EcuKind {
+        match self.ecu {
+            Ecu::Steering(_) => EcuKind::Steering,
+            Ecu::Throttle(_) => EcuKind::Throttle,
+        }
+    }
+
+    fn safety(&mut self) -> &mut Safety {
+        match &mut self.ecu {
+            Ecu::Steering(e) => &mut e.safety,
+            Ecu::Throttle(e) => &mut e.safety,
+        }
+    }
+
+    pub fn safety_ref(&self) -> &Safety {
+        match &self.ecu {
+            Ecu::Steering(e) => &e.safety,
+            Ecu::Throttle(e) => &e.safety,
+        }
+    }
+
+    fn source(&self) -> FaultReportSource {
+        match self.ecu {
+            Ecu::Steering(_) => FaultReportSource::SteeringEcu,
+            Ecu::Throttle(_) => FaultReportSource::ThrottleEcu,
+        }
+    }
+
+    /// A decoded frame from the bus.
+    pub fn handle(&mut self, now: f64, message: &GolfCarMessage) {
+        let own_source = self.source();
+        match (message, &mut self.ecu) {
+            (GolfCarMessage::ControllerHeartbeat(h), _) => self.safety().on_heartbeat(now, h.state),
+            (GolfCarMessage::FaultReport(f), _) if f.source != own_source => {
+                self.safety().on_fault_report(now)
+            }
+            (GolfCarMessage::SteeringCmd(c), Ecu::Steering(e)) => e.on_command(now, c),
+            (GolfCarMessage::ThrottleCmd(c), Ecu::Throttle(e)) => e.on_command(now, c),
+            _ => self.ignored += 1,
+        }
+    }
+
+    /// Move the actuator by `dt` ending at `now`.
+    pub fn step(&mut self, now: f64, dt: f64) {
+        match &mut self.ecu {
+            Ecu::Steering(e) => e.step(now, dt),
+            Ecu::Throttle(e) => e.step(now, dt),
+        }
+    }
+
+    /// The messages due at `now`: the periodic report, and a FAULT_REPORT every 100 ms
+    /// while a fault the ECU detected itself lasts.
+    pub fn due(&mut self, now: f64) -> Vec<GolfCarMessage> {
+        let mut out = Vec::new();
+        if now + 1e-9 >= self.next_report {
+            let (msg, period) = match &self.ecu {
+                Ecu::Steering(e) => (
+                    GolfCarMessage::SteeringReport(e.report()),
+                    period_of::<SteeringReport>(),
+                ),
+                Ecu::Throttle(e) => (
+                    GolfCarMessage::ThrottleReport(e.report()),
+                    period_of::<ThrottleReport>(),
+                ),
+            };
+            out.push(msg);
+            // Next on the absolute schedule, skipping periods missed by a late tick.
+            self.next_report +=
+                period * ((now - self.next_report) / period).floor().max(0.0) + period;
+        }
+        let own = self.safety_ref().fault().and_then(|c| c.own_fault_code());
+        match own {
+            Some(code) if now + 1e-9 >= self.next_fault => {
+                let detail = match self.ecu {
+                    Ecu::Steering(_) => golf_car_can::SteeringCmd::ID,
+                    Ecu::Throttle(_) => golf_car_can::ThrottleCmd::ID,
+                };
+                out.push(GolfCarMessage::FaultReport(FaultReport {
+                    source: self.source(),
+                    code,
+                    detail,
+                }));
+                self.next_fault = now + period_of::<FaultReport>();
+            }
+            Some(_) => {}
+            None => self.next_fault = now,
+        }
+        out
+    }
+}

@@ -1,0 +1,357 @@
+//! One run: the world, the vehicle and the simulated ECUs stepped on a fixed timestep,
+//! the ECUs talking golf_car.dbc on a CAN bus (SocketCAN in HIL, the memory bus in
+//! SIL), and the verdict's bookkeeping.
+
+use embedded_can::nb::Can;
+use firmware_bridge::{BridgeError, CanPort, Received};
+use golf_car_can::E2eStats;
+use serde::Serialize;
+
+use crate::ecu::{Ecu, EcuKind, EcuNode};
+use crate::scenario::Scenario;
+use crate::vehicle::VehicleState;
+use crate::world::World;
+
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "outcome", rename_all = "snake_case")]
+pub enum Outcome {
+    GoalReached {
+        time: f64,
+    },
+    Collision {
+        time: f64,
+        obstacle: usize,
+    },
+    TimeLimit {
+        time: f64,
+    },
+    /// Ended from outside (Ctrl-C, the controller's exit).
+    Stopped {
+        time: f64,
+        reason: String,
+    },
+}
+
+/// Percentiles of a timing distribution, milliseconds.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Jitter {
+    pub samples: usize,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
+}
+
+impl Jitter {
+    /// From absolute deviations in seconds.
+    pub fn of(mut deviations: Vec<f64>) -> Jitter {
+        if deviations.is_empty() {
+            return Jitter::default();
+        }
+        deviations.sort_by(f64::total_cmp);
+        let pick =
+            |q: f64| deviations[((deviations.len() - 1) as f64 * q).round() as usize] * 1000.0;
+        Jitter {
+            samples: deviations.len(),
+            p50_ms: pick(0.5),
+            p99_ms: pick(0.99),
+            max_ms: pick(1.0),
+        }
+    }
+}
+
+/// A node's CAN statistics.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct NodeStats {
+    pub e2e: E2eStats,
+    pub undecodable: u64,
+    pub bus_errors: u64,
+    pub sent: u64,
+    /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
+    /// fault report.
+    pub safe_state_trips: [u64; 4],
+}
+
+/// What the terminal shows and the verdict is built from.
+#[derive(Clone, Debug, Serialize)]
+pub struct Snapshot {
+    pub time: f64,
+    pub vehicle: VehicleState,
+    pub steering_enabled: bool,
+    pub steering_fault: Option<crate::ecu::safety::Cause>,
+    pub throttle_enabled: bool,
+    pub throttle_fault: Option<crate::ecu::safety::Cause>,
+    pub distance_to_goal: f64,
+}
+
+/// A simulated ECU and its connection to the bus.
+#[derive(Debug)]
+struct Station<B> {
+    node: EcuNode,
+    port: CanPort<B>,
+    sent: u64,
+    /// Wall-clock times of the node's periodic reports (HIL jitter).
+    report_times: Vec<f64>,
+}
+
+impl<B: Can> Station<B> {
+    fn stats(&self) -> NodeStats {
+        NodeStats {
+            e2e: self.port.stats(),
+            undecodable: self.port.undecodable(),
+            bus_errors: self.port.bus_errors(),
+            sent: self.sent,
+            safe_state_trips: self.node.safety_ref().trips,
+        }
+    }
+}
+
+/// The simulator's state during a run.
+#[derive(Debug)]
+pub struct Sim<B> {
+    pub scenario: Scenario,
+    pub world: World,
+    pub vehicle: VehicleState,
+    steering: Station<B>,
+    throttle: Station<B>,
+    dt: f64,
+    tick: u64,
+    /// Closest approach of the footprint to each obstacle so far.
+    pub min_clearance: Vec<f64>,
+    pub max_steer_deg: f64,
+    pub max_steer_rate_deg_s: f64,
+    /// How late the ticks came (HIL), seconds.
+    lateness: Vec<f64>,
+}
+
+impl<B: Can> Sim<B> {
+    /// A run of `scenario` with the steering and throttle ECUs on their own bus endpoints.
+    pub fn new(scenario: Scenario, steering: CanPort<B>, throttle: CanPort<B>) -> Sim<B> {
+        let world = World::new(&scenario);
+        let vehicle = VehicleState::at(&scenario.start);
+        let min_clearance = world.clearances(&scenario.vehicle, &vehicle);
+        let station = |kind, port| Station {
+            node: EcuNode::new(kind, &scenario),
+            port,
+            sent: 0,
+            report_times: Vec::new(),
+        };
+        Sim {
+            steering: station(EcuKind::Steering, steering),
+            throttle: station(EcuKind::Throttle, throttle),
+            dt: 1.0 / scenario.sim.physics_hz,
+            tick: 0,
+            world,
+            vehicle,
+            min_clearance,
+            max_steer_deg: 0.0,
+            max_steer_rate_deg_s: 0.0,
+            lateness: Vec::new(),
+            scenario,
+        }
+    }
+
+    /// The physics step, seconds.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// The next tick's number.
+    pub fn next_tick(&self) -> u64 {
+        self.tick
+    }
+
+    /// Simulated time of the last completed tick.
+    pub fn time(&self) -> f64 {
+        self.tick.saturating_sub(1) as f64 * self.dt
+    }
+
+    fn drain(station: &mut Station<B>, now: f64) {
+        while let Some(r) = station.port.try_recv() {
+            if let Received::Message(m) = r {
+                station.node.handle(now, &m);
+            }
+        }
+    }
+
+    fn send_due(station: &mut Station<B>, now: f64, wall: f64) -> Result<(), BridgeError> {
+        for m in station.node.due(now) {
+            if !matches!(m, golf_car_can::GolfCarMessage::FaultReport(_)) {
+                station.report_times.push(wall);
+            }
+            station.port.send_message(&m)?;
+            station.sent += 1;
+        }
+        Ok(())
+    }
+
+    /// One fixed step at `k * dt`: frames in, actuators, vehicle, world, verdict, frames
+    /// out. `wall` is the wall-clock time of the tick (equal to sim time in lockstep),
+    /// `late` how late the tick came. Returns the outcome when the run is over.
+    pub fn step(&mut self, wall: f64, late: f64) -> Result<Option<Outcome>, BridgeError> {
+        let now = self.tick as f64 * self.dt;
+        self.tick += 1;
+        self.lateness.push(late);
+        Self::drain(&mut self.steering, now);
+        Self::drain(&mut self.throttle, now);
+        self.steering.node.step(now, self.dt);
+        self.throttle.node.step(now, self.dt);
+        let (phi, steer_deg, rate) = match &self.steering.node.ecu {
+            Ecu::Steering(e) => (e.angle(), e.angle_deg(), e.rate_deg_s()),
+            Ecu::Throttle(_) => (0.0, 0.0, 0.0),
+        };
+        let v = match &self.throttle.node.ecu {
+            Ecu::Throttle(e) => e.speed(),
+            Ecu::Steering(_) => 0.0,
+        };
+        self.max_steer_deg = self.max_steer_deg.max(steer_deg.abs());
+        self.max_steer_rate_deg_s = self.max_steer_rate_deg_s.max(rate.abs());
+        if now > 0.0 {
+            self.vehicle
+                .step(self.scenario.vehicle.wheelbase, v, phi, self.dt);
+            self.world.set_time(now);
+        }
+        Self::send_due(&mut self.steering, now, wall)?;
+        Self::send_due(&mut self.throttle, now, wall)?;
+
+        let clear = self.world.clearances(&self.scenario.vehicle, &self.vehicle);
+        for (m, c) in self.min_clearance.iter_mut().zip(&clear) {
+            *m = m.min(*c);
+        }
+        if let Some(i) = self
+            .world
+            .footprint_hits(&self.scenario.vehicle, &self.vehicle)
+            .first()
+        {
+            return Ok(Some(Outcome::Collision {
+                time: now,
+                obstacle: *i,
+            }));
+        }
+        if self.scenario.success.reach_goal
+            && self.distance_to_goal() <= self.scenario.goal.tolerance
+        {
+            return Ok(Some(Outcome::GoalReached { time: now }));
+        }
+        if now >= self.scenario.sim.time_limit_s {
+            return Ok(Some(Outcome::TimeLimit { time: now }));
+        }
+        Ok(None)
+    }
+
+    pub fn distance_to_goal(&self) -> f64 {
+        (self.vehicle.x - self.scenario.goal.x).hypot(self.vehicle.y - self.scenario.goal.y)
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            time: self.time(),
+            vehicle: self.vehicle,
+            steering_enabled: self.steering.node.safety_ref().enabled(),
+            steering_fault: self.steering.node.safety_ref().fault(),
+            throttle_enabled: self.throttle.node.safety_ref().enabled(),
+            throttle_fault: self.throttle.node.safety_ref().fault(),
+            distance_to_goal: self.distance_to_goal(),
+        }
+    }
+
+    /// CAN statistics of the two ECUs.
+    pub fn node_stats(&self) -> (NodeStats, NodeStats) {
+        (self.steering.stats(), self.throttle.stats())
+    }
+
+    /// Jitter of the report periods (deviation of each interval from the DBC period).
+    pub fn report_jitter(&self) -> Jitter {
+        let period = crate::ecu::period_of::<golf_car_can::SteeringReport>();
+        let deviations = [&self.steering.report_times, &self.throttle.report_times]
+            .iter()
+            .flat_map(|t| t.windows(2).map(|w| (w[1] - w[0] - period).abs()))
+            .collect();
+        Jitter::of(deviations)
+    }
+
+    /// How late the physics ticks came.
+    pub fn tick_lateness(&self) -> Jitter {
+        Jitter::of(self.lateness.clone())
+    }
+
+    /// The node of one ECU (for tests and the terminal view).
+    pub fn node(&self, kind: EcuKind) -> &EcuNode {
+        match kind {
+            EcuKind::Steering => &self.steering.node,
+            EcuKind::Throttle => &self.throttle.node,
+        }
+    }
+}
+
+/// The result of a run, as JSON for people and CI.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    pub scenario: String,
+    #[serde(flatten)]
+    pub outcome: Outcome,
+    pub final_state: VehicleState,
+    pub path_length: f64,
+    pub distance_to_goal: f64,
+    /// Closest approach of the footprint to each obstacle, metres.
+    pub min_clearance: Vec<f64>,
+    pub max_steer_deg: f64,
+    pub max_steer_rate_deg_s: f64,
+    pub steering_can: NodeStats,
+    pub throttle_can: NodeStats,
+    /// Deviation of the report intervals from their period (wall clock).
+    pub report_jitter: Jitter,
+    /// How late the physics ticks came (wall clock; zero in lockstep).
+    pub tick_lateness: Jitter,
+}
+
+impl<B: Can> Sim<B> {
+    /// The report of the run so far, ended by `outcome`.
+    pub fn report(&self, outcome: Outcome) -> RunReport {
+        let (steering_can, throttle_can) = self.node_stats();
+        RunReport {
+            scenario: self.scenario.name.clone(),
+            outcome,
+            final_state: self.vehicle,
+            path_length: self.vehicle.odometer,
+            distance_to_goal: self.distance_to_goal(),
+            min_clearance: self.min_clearance.clone(),
+            max_steer_deg: self.max_steer_deg,
+            max_steer_rate_deg_s: self.max_steer_rate_deg_s,
+            steering_can,
+            throttle_can,
+            report_jitter: self.report_jitter(),
+            tick_lateness: self.tick_lateness(),
+        }
+    }
+
+    /// Step on `clock` until the run is over or `stop` is raised; `status` sees a
+    /// snapshot every `status_every` simulated seconds.
+    pub fn run<C: crate::clock::Clock>(
+        &mut self,
+        clock: &mut C,
+        stop: &std::sync::atomic::AtomicBool,
+        status_every: f64,
+        status: &mut dyn FnMut(&Snapshot),
+    ) -> Result<Outcome, BridgeError> {
+        let every = ((status_every / self.dt).round() as u64).max(1);
+        loop {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Ok(Outcome::Stopped {
+                    time: self.time(),
+                    reason: "stopped by signal".to_owned(),
+                });
+            }
+            let k = self.next_tick();
+            let late = clock.wait_tick(k);
+            let wall = clock.now();
+            let outcome = self.step(wall, late)?;
+            if k % every == 0 {
+                status(&self.snapshot());
+            }
+            if let Some(o) = outcome {
+                return Ok(o);
+            }
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! The real `ugv-sim` binary's simulated ECUs on a real vcan interface, driven by
+//! can-utils: canplayer replays a controller's frames (heartbeat, enable edge,
+//! steering and throttle commands, all E2E protected), candump records the bus.
+//!
+//! Needs vcan (fails loudly without it); the README's test command runs it natively
+//! or inside `vcan-setup vm`.
+
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, Result, ensure};
+use golf_car_can::candump::{Compact, parse_line};
+use golf_car_can::{
+    CanMessage, ControllerHeartbeat, ControllerHeartbeatState, E2eRx, E2eTx, GolfCarMessage,
+    NETWORK, SteeringCmd, SteeringReportFault, ThrottleCmd, ThrottleCmdGear, ThrottleReportFault,
+};
+use ugv_e2e_tests::{TestVcan, workspace_bin};
+
+const TARGET_DEG: f64 = 20.0;
+const COMMAND_SECONDS: f64 = 2.0;
+
+/// The controller's frames as a candump log for canplayer: 10 ms steps, heartbeat every
+/// 20 ms, enable low for the first 50 ms then high (the explicit enable edge).
+fn controller_log(iface: &str) -> Result<(String, f64)> {
+    let mut tx = E2eTx::new();
+    let mut log = String::new();
+    let t0 = 1_000.0;
+    let mut line = |t: f64, id: u16, data: [u8; 8]| {
+        let frame = Compact {
+            id: u32::from(id),
+            extended: false,
+            data: &data,
+        };
+        log.push_str(&format!("({:.6}) {iface} {frame}\n", t0 + t));
+    };
+    let steps = (COMMAND_SECONDS / 0.01) as usize;
+    for i in 0..steps {
+        let t = i as f64 * 0.01;
+        let enable = t >= 0.05;
+        if i % 2 == 0 {
+            let hb = ControllerHeartbeat {
+                state: ControllerHeartbeatState::Auto,
+            };
+            line(t, ControllerHeartbeat::ID, tx.seal_message(&hb)?);
+        }
+        let steer = SteeringCmd {
+            enable,
+            target_angle: if enable { TARGET_DEG } else { 0.0 },
+            max_rate: 0.0,
+        };
+        line(t, SteeringCmd::ID, tx.seal_message(&steer)?);
+        let drive = ThrottleCmd {
+            enable,
+            gear: ThrottleCmdGear::Forward,
+            brake: 0.0,
+            target_speed: if enable { 1.0 } else { 0.0 },
+            accel_limit: 0.0,
+        };
+        line(t, ThrottleCmd::ID, tx.seal_message(&drive)?);
+    }
+    Ok((log, (steps - 1) as f64 * 0.01))
+}
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_safe_state()
+-> Result<()> {
+    let vcan = TestVcan::new("ecu")?;
+    let dir = tempfile::tempdir()?;
+    let (log, last_cmd_rel) = controller_log(&vcan.name)?;
+    let log_path = dir.path().join("controller.log");
+    std::fs::write(&log_path, log)?;
+
+    // candump first, then the simulator; its reports on candump show both are up.
+    let mut candump = Kill(
+        Command::new("candump")
+            .args(["-L", &vcan.name])
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("candump (can-utils)")?,
+    );
+    let stdout = candump.0.stdout.take().context("candump stdout")?;
+    let (lines_tx, lines) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for l in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if lines_tx.send(l).is_err() {
+                break;
+            }
+        }
+    });
+    let sim = Kill(
+        Command::new(workspace_bin("ugv-sim")?)
+            .args([
+                "run",
+                "--can",
+                &vcan.name,
+                "--time-limit",
+                "120",
+                "--status-every",
+                "5",
+            ])
+            .stdout(Stdio::null())
+            .spawn()
+            .context("ugv-sim")?,
+    );
+    let mut captured = Vec::new();
+    let first = lines
+        .recv_timeout(Duration::from_secs(60))
+        .context("no frame from ugv-sim on the bus within 60 s")?;
+    captured.push(first);
+
+    let player = Command::new("canplayer")
+        .args(["-I", &log_path.to_string_lossy()])
+        .status()
+        .context("canplayer (can-utils)")?;
+    ensure!(player.success(), "canplayer failed: {player}");
+    // Let the watchdog trip and a few safe reports go out.
+    let until = std::time::Instant::now() + Duration::from_secs(3);
+    while let Ok(l) = lines.recv_timeout(until.saturating_duration_since(std::time::Instant::now()))
+    {
+        captured.push(l);
+    }
+    drop(sim);
+    drop(candump);
+
+    // Decode everything, E2E-checked per sender, with candump's kernel timestamps.
+    let mut rx = E2eRx::new(&NETWORK);
+    let mut frames = Vec::new();
+    for l in &captured {
+        let f = parse_line(l).with_context(|| format!("candump line {l:?}"))?;
+        let ts: f64 = f.timestamp.as_deref().unwrap_or("0").parse()?;
+        let (id, payload) = rx
+            .accept_parts(f.id, f.extended, f.remote, &f.data)
+            .with_context(|| format!("E2E of {l:?}"))?;
+        frames.push((ts, GolfCarMessage::decode(id, &payload)?));
+    }
+    let last_cmd = frames
+        .iter()
+        .filter(|(_, m)| matches!(m, GolfCarMessage::SteeringCmd(_)))
+        .map(|(t, _)| *t)
+        .fold(f64::MIN, f64::max);
+    let first_cmd = frames
+        .iter()
+        .find(|(_, m)| matches!(m, GolfCarMessage::SteeringCmd(_)))
+        .map(|(t, _)| *t)
+        .context("no command seen")?;
+    ensure!(
+        (last_cmd - first_cmd - last_cmd_rel).abs() < 1.0,
+        "canplayer kept the log's timing"
+    );
+    let steering: Vec<_> = frames
+        .iter()
+        .filter_map(|(t, m)| match m {
+            GolfCarMessage::SteeringReport(r) => Some((*t, *r)),
+            _ => None,
+        })
+        .collect();
+    let throttle: Vec<_> = frames
+        .iter()
+        .filter_map(|(t, m)| match m {
+            GolfCarMessage::ThrottleReport(r) => Some((*t, *r)),
+            _ => None,
+        })
+        .collect();
+
+    // While commanded: the angle rises to the target, never faster than the rate limit.
+    let limit = ugv_sim_limit();
+    let during: Vec<_> = steering.iter().filter(|(t, _)| *t <= last_cmd).collect();
+    ensure!(
+        during.iter().any(|(_, r)| r.enabled),
+        "the steering ECU never enabled"
+    );
+    for r in &during {
+        ensure!(
+            r.1.rate.abs() <= limit + 0.05,
+            "reported rate {} > {limit}",
+            r.1.rate
+        );
+    }
+    let start = during
+        .iter()
+        .find(|(_, r)| r.angle > 0.5)
+        .context("the angle never moved")?;
+    let end = during
+        .iter()
+        .find(|(_, r)| r.angle >= TARGET_DEG - 0.1)
+        .context("never reached the target")?;
+    let min_time = (TARGET_DEG - 0.1 - start.1.angle) / limit;
+    // Sim time and wall time agree to the reports' scheduling; 50 ms of slack for a VM.
+    ensure!(
+        end.0 - start.0 >= min_time - 0.05,
+        "ramp of {:.3} s is faster than the rate limit allows ({min_time:.3} s)",
+        end.0 - start.0
+    );
+
+    // After the commands stop: both ECUs go to their safe state, with at most one
+    // report period beyond the 100 ms timeout still enabled (counted in reports).
+    for (name, reports) in [
+        (
+            "steering",
+            steering
+                .iter()
+                .map(|(t, r)| (*t, r.enabled, r.fault != SteeringReportFault::None))
+                .collect::<Vec<_>>(),
+        ),
+        (
+            "throttle",
+            throttle
+                .iter()
+                .map(|(t, r)| (*t, r.enabled, r.fault != ThrottleReportFault::None))
+                .collect(),
+        ),
+    ] {
+        let after: Vec<_> = reports.iter().filter(|(t, ..)| *t > last_cmd).collect();
+        let still_enabled = after.iter().take_while(|(_, enabled, _)| *enabled).count();
+        ensure!(
+            still_enabled <= 11,
+            "{name}: {still_enabled} enabled reports after the last command"
+        );
+        let safe = after
+            .iter()
+            .find(|(_, enabled, fault)| !enabled && *fault)
+            .with_context(|| format!("{name} never reported its safe state"))?;
+        eprintln!(
+            "{name}: safe state reported {:.1} ms after the last command",
+            (safe.0 - last_cmd) * 1000.0
+        );
+    }
+    let last_thr = throttle.last().context("no throttle reports")?.1;
+    ensure!(
+        last_thr.brake == 100.0 && last_thr.throttle == 0.0,
+        "{last_thr:?}"
+    );
+    Ok(())
+}
+
+fn ugv_sim_limit() -> f64 {
+    ugv_sim::scenario::SteeringConfig::default().max_rate_deg_s
+}
