@@ -42,6 +42,7 @@ APT_PKGS=(
     busybox-static      # virtme-ng builds the guest initramfs (module loading for 9p/virtio) with it
     can-utils           # candump / cansend / cangen for tests and debugging inside the VM
     iproute2            # `ip link add dev vcan0 type vcan` inside the VM
+    gpsd                # NMEA cross-check: sim/tests/gps_gpsd.rs runs gpsd -N -n -b on the simulated GPS pty
 )
 # From bookworm-backports: the machine image ships qemu-utils 10.0 from backports,
 # which Breaks bookworm's qemu-system-common 7.2 (apt would remove qemu-utils).
@@ -94,6 +95,7 @@ fi
 PIP_PKGS=(
     virtme-ng==1.42     # `vng`: boots the kernel with the host fs shared; quirks above verified on 1.42
     cantools==45.1.0    # DBC encode/decode used by the tests
+    pynmea2==1.19.0     # NMEA cross-check: sim/tests/gps_pynmea2.rs parses every simulated sentence
 )
 PY=${PYTHON:-python3}
 

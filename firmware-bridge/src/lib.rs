@@ -4,12 +4,16 @@
 //!
 //! - [`can`]: a SocketCAN endpoint that speaks golf_car.dbc with E2E protection.
 //! - [`nmea`]: the GPS wire, NMEA 0183 writer and reader, serial and pty endpoints.
+//! - [`laser`]: the laser scan frame and its iceoryx2 publisher/subscriber.
 //! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
 
 pub mod can;
+pub mod clock;
 pub mod geodesy;
+pub mod laser;
 pub mod nmea;
 
 pub use can::{BridgeError, CanPort, Received};
 pub use geodesy::{Enu, Geodetic, LocalFrame};
+pub use laser::{LaserError, LaserFrame, LaserPublisher, LaserSubscriber};
 pub use nmea::{GpsFix, GpsReading, NmeaError, NmeaReader, NmeaWriter};

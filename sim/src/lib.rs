@@ -3,12 +3,19 @@
 //! throttle/brake ECUs as CAN nodes that speak golf_car.dbc exactly as the physical
 //! ones would — stepped on a fixed timestep, in real time (HIL) or lockstep (SIL).
 
-pub mod clock;
+pub mod epoch;
+/// Ticks on absolute deadlines and lockstep (shared with the controller).
+pub use firmware_bridge::clock;
+pub mod devices;
 pub mod ecu;
+pub mod mission;
+pub mod plot;
 pub mod run;
 pub mod scenario;
+pub mod sil;
 pub mod vehicle;
+pub mod verdict;
 pub mod world;
 
-pub use run::{Outcome, RunReport, Sim};
+pub use run::{Outcome, RunReport, Sim, SimError};
 pub use scenario::{Scenario, ScenarioError};

@@ -7,10 +7,34 @@ use firmware_bridge::{BridgeError, CanPort, Received};
 use golf_car_can::E2eStats;
 use serde::Serialize;
 
+use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
+use crate::devices::laser::{LaserDevice, LaserDeviceError};
 use crate::ecu::{Ecu, EcuKind, EcuNode};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 use crate::world::World;
+use firmware_bridge::laser::LaserFrame;
+
+/// Why a run could not go on.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error(transparent)]
+    Bus(#[from] BridgeError),
+    #[error("GPS: {0}")]
+    Gps(#[from] GpsError),
+    #[error("laser: {0}")]
+    Laser(#[from] LaserDeviceError),
+}
+
+/// What the sensors produced in one step (the runner puts it on the wires).
+#[derive(Debug, Default)]
+pub struct SensorOutput {
+    pub gps: Option<GpsEpoch>,
+    pub laser: Option<Box<LaserFrame>>,
+}
+
+/// Seconds between samples of the driven path.
+const TRAJECTORY_EVERY: f64 = 0.05;
 
 /// How a run ended.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -122,6 +146,12 @@ pub struct Sim<B> {
     pub max_steer_rate_deg_s: f64,
     /// How late the ticks came (HIL), seconds.
     lateness: Vec<f64>,
+    gps: Option<GpsDevice>,
+    laser: Option<LaserDevice>,
+    next_scan: f64,
+    outputs: SensorOutput,
+    /// The driven path, sampled every 50 ms.
+    pub trajectory: Vec<(f64, VehicleState)>,
 }
 
 impl<B: Can> Sim<B> {
@@ -147,8 +177,26 @@ impl<B: Can> Sim<B> {
             max_steer_deg: 0.0,
             max_steer_rate_deg_s: 0.0,
             lateness: Vec::new(),
+            gps: None,
+            laser: None,
+            next_scan: 0.0,
+            outputs: SensorOutput::default(),
+            trajectory: vec![(0.0, vehicle)],
             scenario,
         }
+    }
+
+    /// Add the scenario's GPS receiver and laser scanner: each step then leaves their
+    /// output in [`Sim::take_outputs`].
+    pub fn with_sensors(mut self) -> Result<Sim<B>, SimError> {
+        self.gps = Some(GpsDevice::from_scenario(&self.scenario)?);
+        self.laser = Some(LaserDevice::from_scenario(&self.scenario)?);
+        Ok(self)
+    }
+
+    /// What the sensors produced in the last step.
+    pub fn take_outputs(&mut self) -> SensorOutput {
+        std::mem::take(&mut self.outputs)
     }
 
     /// The physics step, seconds.
@@ -188,7 +236,7 @@ impl<B: Can> Sim<B> {
     /// One fixed step at `k * dt`: frames in, actuators, vehicle, world, verdict, frames
     /// out. `wall` is the wall-clock time of the tick (equal to sim time in lockstep),
     /// `late` how late the tick came. Returns the outcome when the run is over.
-    pub fn step(&mut self, wall: f64, late: f64) -> Result<Option<Outcome>, BridgeError> {
+    pub fn step(&mut self, wall: f64, late: f64) -> Result<Option<Outcome>, SimError> {
         let now = self.tick as f64 * self.dt;
         self.tick += 1;
         self.lateness.push(late);
@@ -213,6 +261,25 @@ impl<B: Can> Sim<B> {
         }
         Self::send_due(&mut self.steering, now, wall)?;
         Self::send_due(&mut self.throttle, now, wall)?;
+        if let Some(gps) = &mut self.gps {
+            self.outputs.gps = gps.poll(now, &self.vehicle)?;
+        }
+        if let Some(laser) = &mut self.laser {
+            if now + 1e-9 >= self.next_scan {
+                let v = &self.vehicle;
+                self.outputs.laser =
+                    Some(Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta)));
+                self.next_scan =
+                    firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());
+            }
+        }
+        if self
+            .trajectory
+            .last()
+            .is_some_and(|(t, _)| now - t >= TRAJECTORY_EVERY - 1e-9)
+        {
+            self.trajectory.push((now, self.vehicle));
+        }
 
         let clear = self.world.clearances(&self.scenario.vehicle, &self.vehicle);
         for (m, c) in self.min_clearance.iter_mut().zip(&clear) {
@@ -333,7 +400,7 @@ impl<B: Can> Sim<B> {
         stop: &std::sync::atomic::AtomicBool,
         status_every: f64,
         status: &mut dyn FnMut(&Snapshot),
-    ) -> Result<Outcome, BridgeError> {
+    ) -> Result<Outcome, SimError> {
         let every = ((status_every / self.dt).round() as u64).max(1);
         loop {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {

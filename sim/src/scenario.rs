@@ -308,6 +308,8 @@ pub struct Scenario {
     pub steering: SteeringConfig,
     pub throttle: ThrottleConfig,
     pub can: CanConfig,
+    pub gps: crate::devices::gps::GpsConfig,
+    pub laser: crate::devices::laser::LaserConfig,
     pub sim: SimConfig,
     pub success: SuccessCriteria,
 }
@@ -334,6 +336,8 @@ impl Default for Scenario {
             steering: SteeringConfig::default(),
             throttle: ThrottleConfig::default(),
             can: CanConfig::default(),
+            gps: Default::default(),
+            laser: Default::default(),
             sim: SimConfig::default(),
             success: SuccessCriteria::default(),
         }
@@ -577,6 +581,12 @@ impl Scenario {
             ));
         }
 
+        self.gps
+            .validate()
+            .map_err(|e| bad(&[Key("gps"), Key(e.field)], e.message))?;
+        self.laser
+            .validate()
+            .map_err(|e| bad(&[Key("laser"), Key(e.field)], e.message))?;
         let sim = &self.sim;
         if !(sim.physics_hz.is_finite() && (10.0..=2000.0).contains(&sim.physics_hz)) {
             return Err(bad(
@@ -585,7 +595,7 @@ impl Scenario {
             ));
         }
         positive(&[Key("sim"), Key("time_limit_s")], sim.time_limit_s)?;
-        crate::clock::parse_rfc3339(&sim.epoch).map_err(|e| bad(&[Key("sim"), Key("epoch")], e))?;
+        crate::epoch::parse_rfc3339(&sim.epoch).map_err(|e| bad(&[Key("sim"), Key("epoch")], e))?;
         non_negative(
             &[Key("success"), Key("min_clearance")],
             self.success.min_clearance,

@@ -149,9 +149,7 @@ impl EcuNode {
                 ),
             };
             out.push(msg);
-            // Next on the absolute schedule, skipping periods missed by a late tick.
-            self.next_report +=
-                period * ((now - self.next_report) / period).floor().max(0.0) + period;
+            self.next_report = firmware_bridge::clock::next_slot(self.next_report, now, period);
         }
         let own = self.safety_ref().fault().and_then(|c| c.own_fault_code());
         match own {

@@ -1,78 +1,4 @@
-//! Time: fixed-step ticks on absolute deadlines (a long run does not drift), and a
-//! lockstep clock that advances only when told (faster than real time, deterministic).
-
-use std::time::{Duration, Instant};
-
-/// Where ticks come from.
-pub trait Clock {
-    /// Simulated seconds since the start.
-    fn now(&self) -> f64;
-    /// Wait until tick `k` is due (k * dt after the start); returns how late it is, s.
-    fn wait_tick(&mut self, k: u64) -> f64;
-}
-
-/// Wall-clock ticks at `start + k * dt`: each deadline is computed from the start, not
-/// from the previous tick, so lateness never accumulates.
-#[derive(Debug)]
-pub struct WallClock {
-    start: Instant,
-    dt: f64,
-}
-
-impl WallClock {
-    pub fn new(dt: f64) -> WallClock {
-        WallClock {
-            start: Instant::now(),
-            dt,
-        }
-    }
-
-    /// The instant tick `k` is due.
-    pub fn deadline(&self, k: u64) -> Instant {
-        self.start + Duration::from_secs_f64(k as f64 * self.dt)
-    }
-}
-
-impl Clock for WallClock {
-    fn now(&self) -> f64 {
-        self.start.elapsed().as_secs_f64()
-    }
-
-    fn wait_tick(&mut self, k: u64) -> f64 {
-        let deadline = self.deadline(k);
-        let now = Instant::now();
-        if deadline > now {
-            std::thread::sleep(deadline - now);
-        }
-        Instant::now()
-            .saturating_duration_since(deadline)
-            .as_secs_f64()
-    }
-}
-
-/// Lockstep: tick `k` happens the moment it is asked for.
-#[derive(Debug, Default)]
-pub struct LockstepClock {
-    now: f64,
-    dt: f64,
-}
-
-impl LockstepClock {
-    pub fn new(dt: f64) -> LockstepClock {
-        LockstepClock { now: 0.0, dt }
-    }
-}
-
-impl Clock for LockstepClock {
-    fn now(&self) -> f64 {
-        self.now
-    }
-
-    fn wait_tick(&mut self, k: u64) -> f64 {
-        self.now = k as f64 * self.dt;
-        0.0
-    }
-}
+//! The scenario's epoch: UTC at simulated time zero.
 
 /// Seconds since 1970-01-01T00:00:00Z of an RFC 3339 UTC time
 /// (`2026-05-04T14:00:00Z`, `2026-05-04T14:00:00.25Z`, or with a `+hh:mm` offset).
@@ -174,19 +100,5 @@ mod tests {
         ] {
             assert!(parse_rfc3339(bad).is_err(), "{bad}");
         }
-    }
-
-    #[test]
-    fn lockstep_ticks_are_exact() {
-        let mut c = LockstepClock::new(0.005);
-        c.wait_tick(200);
-        assert!((c.now() - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn wall_deadlines_are_absolute() {
-        let c = WallClock::new(0.005);
-        let d = c.deadline(1_000_000) - c.deadline(0);
-        assert_eq!(d, Duration::from_secs(5000));
     }
 }

@@ -1,0 +1,456 @@
+//! The controller's core, free of I/O: frames, fixes and scans go in, CAN messages
+//! come out of [`Controller::tick`], called every 10 ms. The binary wires it to the
+//! real endpoints (HIL); the simulator runs it in lockstep (SIL) through the same
+//! codecs.
+
+use firmware_bridge::Received;
+use firmware_bridge::clock::next_slot;
+use firmware_bridge::nmea::{FixQuality, GpsReading};
+use golf_car_can::{
+    ControllerHeartbeat, ControllerHeartbeatState, FaultReport, FaultReportCode, FaultReportSource,
+    GolfCarMessage, SteeringCmd, SteeringReport, SteeringReportFault, ThrottleCmd, ThrottleCmdGear,
+    ThrottleReport, ThrottleReportFault,
+};
+use serde::Serialize;
+
+use crate::config::ControllerConfig;
+use crate::guidance::{Circle, FollowInputs, Guidance, GuidanceError, Navigator};
+use crate::localisation::{Localiser, Pose};
+use crate::perception::{Perception, PerceptionError, Pose2, Scan};
+
+/// Command period (STEERING_CMD, THROTTLE_CMD), seconds.
+pub const COMMAND_PERIOD: f64 = 0.01;
+/// Heartbeat period, seconds.
+pub const HEARTBEAT_PERIOD: f64 = 0.02;
+/// FAULT_REPORT repetition while a fault lasts, seconds.
+pub const FAULT_PERIOD: f64 = 0.1;
+/// How long the enable bit stays low before the explicit enable edge, seconds.
+const ENABLE_LOW: f64 = 0.05;
+/// How long the ECUs get to report enabled after the edge, seconds.
+const ENABLE_TIMEOUT: f64 = 1.0;
+/// Below this speed the car counts as stopped, m/s.
+const STOPPED: f64 = 0.05;
+
+/// Why the controller could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ControllerError {
+    #[error("datum: {0}")]
+    Datum(#[from] firmware_bridge::geodesy::GeodesyError),
+    #[error(transparent)]
+    Guidance(#[from] GuidanceError),
+    #[error("perception: {0}")]
+    Perception(#[from] PerceptionError),
+}
+
+/// A laser frame as perception reads it, stamped with the controller's time.
+pub fn scan_of(frame: &firmware_bridge::laser::LaserFrame, stamp: f64) -> Scan<'_> {
+    Scan {
+        stamp,
+        angle_min: f64::from(frame.angle_min),
+        angle_increment: f64::from(frame.angle_increment),
+        range_min: f64::from(frame.range_min),
+        range_max: f64::from(frame.range_max),
+        ranges: frame.ranges(),
+    }
+}
+
+/// The controller's mode.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "mode", rename_all = "snake_case")]
+pub enum Mode {
+    /// Heartbeat idle until GPS (with heading), laser and both ECUs are there.
+    WaitingForSensors,
+    /// Heartbeat auto, the enable edge sent, waiting for both ECUs to report enabled.
+    Enabling { since: f64 },
+    /// Driving the mission (or holding a controlled stop when no path is free).
+    Auto,
+    /// Within the goal tolerance: braking to a stop, then idle.
+    Arrived { stopped: bool },
+    /// A safety fault: estop heartbeat, ECUs disabled (brake, steering hold).
+    Estop { code: String, reason: String },
+}
+
+/// One control tick, for the report, the plots and ANFIS training data.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Sample {
+    pub t: f64,
+    pub pose: Pose,
+    pub inputs: FollowInputs,
+    /// Commanded road-wheel angle and speed.
+    pub steer_cmd: f64,
+    pub speed_cmd: f64,
+}
+
+/// The controller.
+#[derive(Debug)]
+pub struct Controller {
+    cfg: ControllerConfig,
+    loc: Localiser,
+    perception: Perception,
+    pub nav: Navigator,
+    mode: Mode,
+    steering: Option<(f64, SteeringReport)>,
+    throttle: Option<(f64, ThrottleReport)>,
+    ecu_fault: Option<String>,
+    last_scan: Option<f64>,
+    obstacles: Vec<Circle>,
+    stop_reason: Option<String>,
+    next_heartbeat: f64,
+    next_command: f64,
+    next_fault: f64,
+    /// Scans perception refused.
+    pub bad_scans: u64,
+    /// The code sent in FAULT_REPORT while in estop.
+    fault_code: FaultReportCode,
+    pub samples: Vec<Sample>,
+}
+
+impl Controller {
+    pub fn new(cfg: &ControllerConfig) -> Result<Controller, ControllerError> {
+        // Walls become chains of circles sized for the radius the planner inflates by.
+        let mut perception = cfg.perception.clone();
+        perception.vehicle_radius = cfg.vehicle.radius + cfg.planner.safety_margin;
+        Ok(Controller {
+            loc: Localiser::new(cfg)?,
+            perception: Perception::new(perception)?,
+            nav: Navigator::new(cfg)?,
+            cfg: cfg.clone(),
+            mode: Mode::WaitingForSensors,
+            steering: None,
+            throttle: None,
+            ecu_fault: None,
+            last_scan: None,
+            obstacles: Vec::new(),
+            stop_reason: None,
+            next_heartbeat: 0.0,
+            next_command: 0.0,
+            next_fault: 0.0,
+            bad_scans: 0,
+            fault_code: FaultReportCode::Internal,
+            samples: Vec::new(),
+        })
+    }
+
+    pub fn mode(&self) -> &Mode {
+        &self.mode
+    }
+
+    /// The reason of the current controlled stop, if guidance is holding one.
+    pub fn stop_reason(&self) -> Option<&str> {
+        self.stop_reason.as_deref()
+    }
+
+    /// The obstacles guidance plans around.
+    pub fn obstacles(&self) -> &[Circle] {
+        &self.obstacles
+    }
+
+    /// The pose estimate at `now`.
+    pub fn pose(&self, now: f64) -> Option<Pose> {
+        self.loc.predict(now)
+    }
+
+    /// The mission is over: arrived and stopped.
+    pub fn finished(&self) -> bool {
+        matches!(self.mode, Mode::Arrived { stopped: true })
+    }
+
+    /// A frame from the bus.
+    pub fn on_can(&mut self, now: f64, received: &Received) {
+        let Received::Message(m) = received else {
+            return;
+        };
+        match m {
+            GolfCarMessage::SteeringReport(r) => {
+                if r.fault != SteeringReportFault::None && self.driving() {
+                    self.ecu_fault = Some(format!("steering ECU reports {}", r.fault));
+                }
+                self.steering = Some((now, *r));
+            }
+            GolfCarMessage::ThrottleReport(r) => {
+                if r.fault != ThrottleReportFault::None && self.driving() {
+                    self.ecu_fault = Some(format!("throttle ECU reports {}", r.fault));
+                }
+                self.throttle = Some((now, *r));
+            }
+            GolfCarMessage::FaultReport(f)
+                if f.source != FaultReportSource::Controller && self.driving() =>
+            {
+                self.ecu_fault = Some(format!("FAULT_REPORT from {}: {}", f.source, f.code));
+            }
+            _ => {}
+        }
+        let speed = self.throttle.map_or(0.0, |(_, r)| r.wheel_speed);
+        let phi = self.steering.map_or(0.0, |(_, r)| r.angle.to_radians());
+        self.loc.on_actuators(speed, phi);
+    }
+
+    fn driving(&self) -> bool {
+        matches!(self.mode, Mode::Auto | Mode::Arrived { stopped: false })
+    }
+
+    /// A GPS epoch.
+    pub fn on_gps(&mut self, now: f64, reading: &GpsReading) {
+        self.loc.on_fix(now, reading);
+    }
+
+    /// A laser scan.
+    pub fn on_scan(&mut self, now: f64, scan: &Scan<'_>) {
+        self.last_scan = Some(now);
+        let Some(pose) = self.loc.predict(now) else {
+            return;
+        };
+        let v = &self.cfg.vehicle;
+        let mount = Pose2 {
+            x: v.laser_x,
+            y: v.laser_y,
+            yaw: v.laser_yaw_deg.to_radians(),
+        };
+        let at = Pose2 {
+            x: pose.x,
+            y: pose.y,
+            yaw: pose.theta,
+        };
+        // A malformed scan is counted and skipped; silence is what the safety checks.
+        match self.perception.update(scan, &mount, &at) {
+            Ok(out) => {
+                self.obstacles = out
+                    .obstacles
+                    .iter()
+                    .map(|o| Circle {
+                        x: o.x,
+                        y: o.y,
+                        radius: o.radius,
+                        vx: o.vx,
+                        vy: o.vy,
+                    })
+                    .collect();
+            }
+            Err(_) => self.bad_scans += 1,
+        }
+    }
+
+    fn fix_ok(&self, now: f64) -> Result<(), (FaultReportCode, String)> {
+        let s = &self.cfg.safety;
+        match self.loc.last_fix {
+            None => Err((FaultReportCode::GpsLost, "no GPS fix".to_owned())),
+            Some((t, _)) if now - t > s.gps_timeout_s => Err((
+                FaultReportCode::GpsLost,
+                format!("no GPS fix for {:.2} s", now - t),
+            )),
+            Some((_, q)) => {
+                let good =
+                    q == FixQuality::RtkFixed || (s.accept_rtk_float && q == FixQuality::RtkFloat);
+                if good {
+                    Ok(())
+                } else {
+                    Err((
+                        FaultReportCode::GpsDegraded,
+                        format!("GPS fix quality {q:?} is below RTK"),
+                    ))
+                }
+            }
+        }
+    }
+
+    /// Every reason to stop now (sensors, reports, ECU faults).
+    fn safety_check(&self, now: f64) -> Result<(), (FaultReportCode, String)> {
+        self.fix_ok(now)?;
+        let s = &self.cfg.safety;
+        match self.last_scan {
+            Some(t) if now - t <= s.laser_timeout_s => {}
+            Some(t) => {
+                return Err((
+                    FaultReportCode::LaserSilent,
+                    format!("no laser scan for {:.2} s", now - t),
+                ));
+            }
+            None => return Err((FaultReportCode::LaserSilent, "no laser scan".to_owned())),
+        }
+        for (name, last) in [
+            ("STEERING_REPORT", self.steering.map(|s| s.0)),
+            ("THROTTLE_REPORT", self.throttle.map(|s| s.0)),
+        ] {
+            match last {
+                Some(t) if now - t <= s.report_timeout_s => {}
+                _ => return Err((FaultReportCode::ReportTimeout, format!("{name} silent"))),
+            }
+        }
+        if let Some(f) = &self.ecu_fault {
+            return Err((FaultReportCode::ActuatorFault, f.clone()));
+        }
+        Ok(())
+    }
+
+    fn estop(&mut self, code: FaultReportCode, reason: String) {
+        self.mode = Mode::Estop {
+            code: code.label().to_owned(),
+            reason,
+        };
+        self.fault_code = code;
+        self.next_fault = 0.0;
+    }
+
+    fn measured_angle(&self) -> f64 {
+        self.steering.map_or(0.0, |(_, r)| r.angle)
+    }
+
+    fn speed(&self) -> f64 {
+        self.throttle.map_or(0.0, |(_, r)| r.wheel_speed)
+    }
+
+    /// Advance the mode machine and return the messages due at `now`.
+    pub fn tick(&mut self, now: f64) -> Vec<GolfCarMessage> {
+        let v = self.cfg.vehicle.clone();
+        let limit = v.max_steer_deg.min(45.0);
+        // Mode transitions.
+        match self.mode.clone() {
+            Mode::WaitingForSensors => {
+                if self.safety_check(now).is_ok() && self.loc.heading_known() {
+                    self.mode = Mode::Enabling { since: now };
+                }
+            }
+            Mode::Enabling { since } => {
+                if let Err((code, reason)) = self.safety_check(now) {
+                    self.estop(code, reason);
+                } else if self.steering.is_some_and(|s| s.1.enabled)
+                    && self.throttle.is_some_and(|t| t.1.enabled)
+                {
+                    self.mode = Mode::Auto;
+                } else if now - since > ENABLE_TIMEOUT {
+                    self.estop(
+                        FaultReportCode::ActuatorFault,
+                        "the ECUs did not enable".to_owned(),
+                    );
+                }
+            }
+            Mode::Auto | Mode::Arrived { stopped: false } => {
+                if let Err((code, reason)) = self.safety_check(now) {
+                    self.estop(code, reason);
+                }
+            }
+            Mode::Arrived { stopped: true } | Mode::Estop { .. } => {}
+        }
+
+        // What to ask of the actuators.
+        let hold = self.measured_angle();
+        // (heartbeat, (steering enable, angle deg), (throttle enable, speed, brake %))
+        let (state, steer, drive): (ControllerHeartbeatState, (bool, f64), (bool, f64, f64)) =
+            match self.mode.clone() {
+                Mode::WaitingForSensors => (
+                    ControllerHeartbeatState::Idle,
+                    (false, hold),
+                    (false, 0.0, 100.0),
+                ),
+                Mode::Enabling { since } => {
+                    let enable = now - since >= ENABLE_LOW;
+                    (
+                        ControllerHeartbeatState::Auto,
+                        (enable, hold),
+                        (enable, 0.0, 100.0),
+                    )
+                }
+                Mode::Auto => match self.loc.predict(now) {
+                    None => (
+                        ControllerHeartbeatState::Auto,
+                        (true, hold),
+                        (true, 0.0, 50.0),
+                    ),
+                    Some(pose) => match self.nav.update(now, &pose, &self.obstacles) {
+                        Guidance::Drive {
+                            steer,
+                            speed,
+                            inputs,
+                        } => {
+                            self.stop_reason = None;
+                            let steer_deg = steer.to_degrees().clamp(-limit, limit);
+                            let speed = speed.clamp(0.0, v.max_speed.min(10.0));
+                            self.samples.push(Sample {
+                                t: now,
+                                pose,
+                                inputs,
+                                steer_cmd: steer_deg.to_radians(),
+                                speed_cmd: speed,
+                            });
+                            (
+                                ControllerHeartbeatState::Auto,
+                                (true, steer_deg),
+                                (true, speed, 0.0),
+                            )
+                        }
+                        Guidance::Stop { reason } => {
+                            self.stop_reason = Some(reason);
+                            (
+                                ControllerHeartbeatState::Auto,
+                                (true, hold),
+                                (true, 0.0, 40.0),
+                            )
+                        }
+                        Guidance::Arrived => {
+                            self.mode = Mode::Arrived { stopped: false };
+                            (
+                                ControllerHeartbeatState::Auto,
+                                (true, hold),
+                                (true, 0.0, 60.0),
+                            )
+                        }
+                    },
+                },
+                Mode::Arrived { stopped } => {
+                    if !stopped && self.speed().abs() < STOPPED {
+                        self.mode = Mode::Arrived { stopped: true };
+                    }
+                    if stopped {
+                        (
+                            ControllerHeartbeatState::Idle,
+                            (false, hold),
+                            (false, 0.0, 100.0),
+                        )
+                    } else {
+                        (
+                            ControllerHeartbeatState::Auto,
+                            (true, hold),
+                            (true, 0.0, 60.0),
+                        )
+                    }
+                }
+                Mode::Estop { .. } => (
+                    ControllerHeartbeatState::Estop,
+                    (false, hold),
+                    (false, 0.0, 100.0),
+                ),
+            };
+
+        let mut out = Vec::new();
+        if now + 1e-9 >= self.next_heartbeat {
+            out.push(GolfCarMessage::ControllerHeartbeat(ControllerHeartbeat {
+                state,
+            }));
+            self.next_heartbeat = next_slot(self.next_heartbeat, now, HEARTBEAT_PERIOD);
+        }
+        if now + 1e-9 >= self.next_command {
+            out.push(GolfCarMessage::SteeringCmd(SteeringCmd {
+                enable: steer.0,
+                target_angle: steer.1.clamp(-limit, limit),
+                max_rate: v.steer_rate_deg_s.clamp(0.0, 500.0),
+            }));
+            out.push(GolfCarMessage::ThrottleCmd(ThrottleCmd {
+                enable: drive.0,
+                gear: ThrottleCmdGear::Forward,
+                brake: drive.2.clamp(0.0, 100.0),
+                target_speed: drive.1.clamp(0.0, v.max_speed.min(10.0)),
+                accel_limit: self.cfg.follower.accel_limit.clamp(0.0, 5.0),
+            }));
+            self.next_command = next_slot(self.next_command, now, COMMAND_PERIOD);
+        }
+        if matches!(self.mode, Mode::Estop { .. }) && now + 1e-9 >= self.next_fault {
+            out.push(GolfCarMessage::FaultReport(FaultReport {
+                source: FaultReportSource::Controller,
+                code: self.fault_code,
+                detail: 0,
+            }));
+            self.next_fault = now + FAULT_PERIOD;
+        }
+        out
+    }
+}

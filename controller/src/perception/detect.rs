@@ -1,0 +1,300 @@
+//! One scan's detections: clusters classified as posts, wall segments and blobs.
+
+use std::f64::consts::PI;
+use std::ops::Range;
+
+use serde::{Deserialize, Serialize};
+
+use super::PerceptionError;
+use super::cluster::cluster_points;
+use super::config::PerceptionConfig;
+use super::fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
+use super::frame::{Pose2, Scan, ScanPoint, scan_points};
+
+/// What an obstacle is taken for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObstacleKind {
+    /// A cluster explained by a circle (a post, a tree trunk, a leg).
+    Post,
+    /// One circle of the chain standing for a wall segment.
+    WallPiece,
+    /// A cluster too small or too irregular for a shape: its enclosing circle.
+    Unknown,
+}
+
+/// A circular measurement: a post's circle fit or a blob's enclosing circle.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CircleMeasurement {
+    /// Centre in the world frame.
+    pub centre: [f64; 2],
+    pub radius: f64,
+    /// Covariance of the centre (from the fit; a blob's is (r/2)^2 per axis).
+    pub centre_covariance: [[f64; 2]; 2],
+    /// Variance of the radius.
+    pub radius_variance: f64,
+    /// Post or Unknown.
+    pub kind: ObstacleKind,
+    /// RMS residual of the circle fit (0 for a blob).
+    pub rms: f64,
+    /// Number of hits.
+    pub points: usize,
+    /// Index of the cluster in [`Detections::clusters`].
+    pub cluster: usize,
+}
+
+/// A straight wall piece (world frame), p0 at the end of the lower beam index.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SegmentMeasurement {
+    pub p0: [f64; 2],
+    pub p1: [f64; 2],
+    /// Half the spread of the hits across the fitted line.
+    pub half_thickness: f64,
+    /// RMS perpendicular residual.
+    pub rms: f64,
+    pub points: usize,
+    pub cluster: usize,
+}
+
+impl SegmentMeasurement {
+    pub fn length(&self) -> f64 {
+        (self.p1[0] - self.p0[0]).hypot(self.p1[1] - self.p0[1])
+    }
+}
+
+/// Everything one scan shows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Detections {
+    pub stamp: f64,
+    /// The laser's pose in the world frame.
+    pub laser: Pose2,
+    /// The hits in beam order.
+    pub points: Vec<ScanPoint>,
+    /// Clusters as index ranges into `points`.
+    pub clusters: Vec<Range<usize>>,
+    /// Posts and blobs.
+    pub circles: Vec<CircleMeasurement>,
+    /// Wall segments.
+    pub segments: Vec<SegmentMeasurement>,
+}
+
+/// Detects the obstacles of one scan (no tracking): transformation, clustering and
+/// shape classification (see the module documentation).
+pub fn detect(
+    scan: &Scan<'_>,
+    mount: &Pose2,
+    pose: &Pose2,
+    cfg: &PerceptionConfig,
+) -> Result<Detections, PerceptionError> {
+    cfg.validate()?;
+    let points = scan_points(scan, mount, pose)?;
+    let clusters = cluster_points(scan, &points, cfg);
+    let laser = pose.compose(mount);
+    let origin = [laser.x, laser.y];
+    let mut circles = Vec::new();
+    let mut segments = Vec::new();
+    for (index, range) in clusters.iter().enumerate() {
+        let world: Vec<[f64; 2]> = points[range.clone()].iter().map(|p| p.world).collect();
+        classify(&world, origin, index, cfg, &mut circles, &mut segments);
+    }
+    Ok(Detections {
+        stamp: scan.stamp,
+        laser,
+        points,
+        clusters,
+        circles,
+        segments,
+    })
+}
+
+fn classify(
+    pts: &[[f64; 2]],
+    origin: [f64; 2],
+    cluster: usize,
+    cfg: &PerceptionConfig,
+    circles: &mut Vec<CircleMeasurement>,
+    segments: &mut Vec<SegmentMeasurement>,
+) {
+    let n = pts.len();
+    if n >= cfg.circle_min_points {
+        let line = fit_line(pts);
+        if let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
+            && is_post(&c, line.as_ref(), pts, origin, cfg)
+        {
+            circles.push(CircleMeasurement {
+                centre: c.centre,
+                radius: c.radius,
+                centre_covariance: [
+                    [c.covariance[0][0], c.covariance[0][1]],
+                    [c.covariance[1][0], c.covariance[1][1]],
+                ],
+                radius_variance: c.covariance[2][2],
+                kind: ObstacleKind::Post,
+                rms: c.rms,
+                points: n,
+                cluster,
+            });
+            return;
+        }
+    }
+    if n >= cfg.line_min_points {
+        for piece in split_and_merge(pts, cfg.split_distance) {
+            let sub = &pts[piece];
+            let line = (sub.len() >= cfg.line_min_points)
+                .then(|| fit_line(sub))
+                .flatten()
+                .filter(|l| l.length() >= cfg.segment_min_length);
+            match line {
+                Some(l) => segments.push(segment(&l, sub.len(), cluster)),
+                None => circles.extend(blob(sub, origin, cluster, cfg)),
+            }
+        }
+    } else {
+        circles.extend(blob(pts, origin, cluster, cfg));
+    }
+}
+
+fn is_post(
+    c: &CircleFit,
+    line: Option<&LineFit>,
+    pts: &[[f64; 2]],
+    origin: [f64; 2],
+    cfg: &PerceptionConfig,
+) -> bool {
+    if !(c.radius >= cfg.circle_radius_min && c.radius <= cfg.circle_radius_max) {
+        return false;
+    }
+    if c.rms > cfg.circle_rms_max {
+        return false;
+    }
+    // Seen from outside: the laser outside the circle, the centre behind the hits.
+    let to_laser = (origin[0] - c.centre[0]).hypot(origin[1] - c.centre[1]);
+    if to_laser <= c.radius {
+        return false;
+    }
+    let n = pts.len() as f64;
+    let g = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let behind =
+        (c.centre[0] - g[0]) * (g[0] - origin[0]) + (c.centre[1] - g[1]) * (g[1] - origin[1]);
+    if behind <= 0.0 {
+        return false;
+    }
+    line.is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
+}
+
+fn segment(l: &LineFit, points: usize, cluster: usize) -> SegmentMeasurement {
+    SegmentMeasurement {
+        p0: l.p0,
+        p1: l.p1,
+        half_thickness: 0.5 * (l.residual_max - l.residual_min),
+        rms: l.rms,
+        points,
+        cluster,
+    }
+}
+
+/// The enclosing circle of a small or irregular cluster: r0 half its chord (at least
+/// `blob_min_radius`), the centre the centroid pushed away from the laser by
+/// 2 r0 / pi, the radius enlarged to enclose every hit.
+fn blob(
+    pts: &[[f64; 2]],
+    origin: [f64; 2],
+    cluster: usize,
+    cfg: &PerceptionConfig,
+) -> Option<CircleMeasurement> {
+    let (first, last) = (pts.first()?, pts.last()?);
+    let n = pts.len() as f64;
+    let g = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let r0 = (0.5 * (last[0] - first[0]).hypot(last[1] - first[1])).max(cfg.blob_min_radius);
+    let (ux, uy) = (g[0] - origin[0], g[1] - origin[1]);
+    let dist = ux.hypot(uy);
+    let shift = 2.0 * r0 / PI;
+    let centre = if dist > 0.0 {
+        [g[0] + shift * ux / dist, g[1] + shift * uy / dist]
+    } else {
+        g
+    };
+    let radius = pts
+        .iter()
+        .map(|p| (p[0] - centre[0]).hypot(p[1] - centre[1]))
+        .fold(r0, f64::max);
+    let s2 = (0.5 * radius).powi(2);
+    Some(CircleMeasurement {
+        centre,
+        radius,
+        centre_covariance: [[s2, 0.0], [0.0, s2]],
+        radius_variance: s2,
+        kind: ObstacleKind::Unknown,
+        rms: 0.0,
+        points: pts.len(),
+        cluster,
+    })
+}
+
+/// The circles standing for a wall segment: returns their common radius and their
+/// centres, evenly spaced on p0-p1, both ends included. With h the half thickness,
+/// r = max(`wall_circle_min_radius`, h + `wall_circle_margin`) and r0 =
+/// `vehicle_radius`, the spacing is at most `2 sqrt((r + r0)^2 - (h + r0)^2)`, so the
+/// circles grown by r0 contain every point within h + r0 of the segment (and with
+/// r0 = 0 the circles contain the footprint: every point within h of it).
+pub fn cover_segment(
+    p0: [f64; 2],
+    p1: [f64; 2],
+    half_thickness: f64,
+    cfg: &PerceptionConfig,
+) -> (f64, Vec<[f64; 2]>) {
+    let h = if half_thickness.is_finite() {
+        half_thickness.max(0.0)
+    } else {
+        0.0
+    };
+    let r = cfg.wall_circle_min_radius.max(h + cfg.wall_circle_margin);
+    let big = r + cfg.vehicle_radius;
+    let need = h + cfg.vehicle_radius;
+    let spacing = 2.0 * ((big - need) * (big + need)).sqrt();
+    let length = (p1[0] - p0[0]).hypot(p1[1] - p0[1]);
+    if !(length > 0.0 && spacing > 0.0 && length.is_finite()) {
+        return (r, vec![p0]);
+    }
+    // ceil of a finite positive ratio; bounded so a degenerate config cannot explode.
+    let intervals = (length / spacing).ceil().clamp(1.0, 1e5) as usize;
+    let centres = (0..=intervals)
+        .map(|i| {
+            let t = i as f64 / intervals as f64;
+            [p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1])]
+        })
+        .collect();
+    (r, centres)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chain_spacing_respects_the_waist_condition() {
+        let cfg = PerceptionConfig {
+            vehicle_radius: 1.0,
+            ..PerceptionConfig::default()
+        };
+        let (r, c) = cover_segment([0.0, 0.0], [10.0, 0.0], 0.05, &cfg);
+        assert!((r - 0.25).abs() < 1e-12);
+        let s = c[1][0] - c[0][0];
+        let waist = ((r + 1.0).powi(2) - (s / 2.0).powi(2)).sqrt();
+        assert!(waist >= 1.05 - 1e-12, "waist {waist}");
+        assert_eq!(c.first(), Some(&[0.0, 0.0]));
+        assert_eq!(c.last(), Some(&[10.0, 0.0]));
+    }
+
+    #[test]
+    fn zero_length_segment_is_one_circle() {
+        let (_, c) = cover_segment([1.0, 2.0], [1.0, 2.0], 0.0, &PerceptionConfig::default());
+        assert_eq!(c, vec![[1.0, 2.0]]);
+    }
+}

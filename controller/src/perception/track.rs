@@ -1,0 +1,639 @@
+//! Multi-target tracking: constant-velocity Kalman filters for posts and blobs, static
+//! wall tracks, M-of-N birth, K-miss deletion, and the planner's circles.
+
+use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
+use serde::{Deserialize, Serialize};
+
+use super::config::PerceptionConfig;
+use super::detect::{
+    CircleMeasurement, Detections, ObstacleKind, SegmentMeasurement, cover_segment, detect,
+};
+use super::frame::{Pose2, Scan};
+use super::{PerceptionError, check_finite};
+use crate::planner::Obstacle;
+
+/// A circle for the planner (world frame, at the scan's stamp).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrackedObstacle {
+    /// Track id (shared by all circles of one wall).
+    pub id: u64,
+    /// Index of the circle in its wall's chain (0 for posts and blobs).
+    pub part: u32,
+    /// Centre, metres.
+    pub x: f64,
+    pub y: f64,
+    pub radius: f64,
+    /// Velocity after the dead band (zero for static obstacles and walls), m/s.
+    pub vx: f64,
+    pub vy: f64,
+    /// The filter's velocity before the dead band, m/s.
+    pub velocity_estimate: [f64; 2],
+    pub kind: ObstacleKind,
+    /// Fraction of hits over the last `birth_window` scans.
+    pub confidence: f64,
+    /// Seconds since the track's first detection.
+    pub age: f64,
+    /// Scans in which the track was detected.
+    pub hits: u32,
+    /// Consecutive scans without a detection (coasting when > 0).
+    pub misses: u32,
+}
+
+impl TrackedObstacle {
+    /// The planner's obstacle (centre, radius, velocity).
+    pub fn to_planner(&self) -> Obstacle {
+        Obstacle {
+            x: self.x,
+            y: self.y,
+            radius: self.radius,
+            vx: self.vx,
+            vy: self.vy,
+        }
+    }
+}
+
+/// A tracked wall segment, for plotting.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WallSegment {
+    pub id: u64,
+    pub p0: [f64; 2],
+    pub p1: [f64; 2],
+    pub half_thickness: f64,
+    pub rms: f64,
+    pub confidence: f64,
+    pub age: f64,
+    pub hits: u32,
+    pub misses: u32,
+}
+
+/// The tracker's answer to one scan.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PerceptionOutput {
+    pub stamp: f64,
+    /// Confirmed obstacles within the detection radius, by id then part.
+    pub obstacles: Vec<TrackedObstacle>,
+    /// Confirmed wall segments reaching into the detection radius, by id.
+    pub segments: Vec<WallSegment>,
+}
+
+impl PerceptionOutput {
+    /// The planner's obstacles.
+    pub fn planner_obstacles(&self) -> Vec<Obstacle> {
+        self.obstacles
+            .iter()
+            .map(TrackedObstacle::to_planner)
+            .collect()
+    }
+}
+
+/// Birth and death bookkeeping.
+#[derive(Clone, Copy, Debug)]
+struct Life {
+    /// Bit 0: the latest scan; 1 = hit.
+    history: u32,
+    scans: u32,
+    hits: u32,
+    misses: u32,
+    confirmed: bool,
+    born: f64,
+}
+
+impl Life {
+    fn new(stamp: f64, cfg: &PerceptionConfig) -> Self {
+        Life {
+            history: 1,
+            scans: 1,
+            hits: 1,
+            misses: 0,
+            confirmed: cfg.birth_hits <= 1,
+            born: stamp,
+        }
+    }
+
+    fn window_hits(&self, cfg: &PerceptionConfig) -> u32 {
+        let mask = if cfg.birth_window >= 32 {
+            u32::MAX
+        } else {
+            (1u32 << cfg.birth_window) - 1
+        };
+        (self.history & mask).count_ones()
+    }
+
+    fn record(&mut self, hit: bool, cfg: &PerceptionConfig) {
+        self.history = (self.history << 1) | u32::from(hit);
+        self.scans = self.scans.saturating_add(1);
+        if hit {
+            self.hits = self.hits.saturating_add(1);
+            self.misses = 0;
+        } else {
+            self.misses = self.misses.saturating_add(1);
+        }
+        if !self.confirmed
+            && self.scans <= cfg.birth_window
+            && self.window_hits(cfg) >= cfg.birth_hits
+        {
+            self.confirmed = true;
+        }
+    }
+
+    fn dead(&self, cfg: &PerceptionConfig) -> bool {
+        self.misses >= cfg.delete_misses || (!self.confirmed && self.scans >= cfg.birth_window)
+    }
+
+    fn confidence(&self, cfg: &PerceptionConfig) -> f64 {
+        let window = self.scans.min(cfg.birth_window).max(1);
+        f64::from(self.window_hits(cfg)) / f64::from(window)
+    }
+}
+
+const H: Matrix2x4<f64> = Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+
+/// A post or blob: constant-velocity Kalman filter (x, y, vx, vy) and a radius filter.
+#[derive(Clone, Debug)]
+struct PointTrack {
+    id: u64,
+    state: Vector4<f64>,
+    cov: Matrix4<f64>,
+    radius: f64,
+    radius_var: f64,
+    kind: ObstacleKind,
+    life: Life,
+}
+
+impl PointTrack {
+    /// The measurement's centre covariance plus `position_sigma_min^2` per axis; a blob
+    /// measuring a post (a few hits of it, e.g. at the edge of the field of view) may
+    /// be any part of it: plus the post's radius squared per axis.
+    fn measurement_covariance(
+        &self,
+        m: &CircleMeasurement,
+        cfg: &PerceptionConfig,
+    ) -> Matrix2<f64> {
+        let c = m.centre_covariance;
+        let mut extra = cfg.position_sigma_min * cfg.position_sigma_min;
+        if self.kind == ObstacleKind::Post && m.kind != ObstacleKind::Post {
+            extra += self.radius * self.radius;
+        }
+        Matrix2::new(c[0][0] + extra, c[0][1], c[1][0], c[1][1] + extra)
+    }
+
+    fn new(id: u64, m: &CircleMeasurement, stamp: f64, cfg: &PerceptionConfig) -> Self {
+        let v0 = cfg.initial_velocity_sigma * cfg.initial_velocity_sigma;
+        let mut track = PointTrack {
+            id,
+            state: Vector4::new(m.centre[0], m.centre[1], 0.0, 0.0),
+            cov: Matrix4::from_diagonal(&Vector4::new(0.0, 0.0, v0, v0)),
+            radius: m.radius,
+            radius_var: m.radius_variance + cfg.range_noise_sigma * cfg.range_noise_sigma,
+            kind: m.kind,
+            life: Life::new(stamp, cfg),
+        };
+        let r = track.measurement_covariance(m, cfg);
+        track.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
+        track
+    }
+
+    fn predict(&mut self, dt: f64, cfg: &PerceptionConfig) {
+        let mut f = Matrix4::identity();
+        f[(0, 2)] = dt;
+        f[(1, 3)] = dt;
+        let q = cfg.accel_noise;
+        let (q11, q12, q22) = (q * dt.powi(3) / 3.0, q * dt * dt / 2.0, q * dt);
+        let qm = Matrix4::new(
+            q11, 0.0, q12, 0.0, //
+            0.0, q11, 0.0, q12, //
+            q12, 0.0, q22, 0.0, //
+            0.0, q12, 0.0, q22,
+        );
+        self.state = f * self.state;
+        self.cov = f * self.cov * f.transpose() + qm;
+        self.radius_var += cfg.radius_process_sigma * cfg.radius_process_sigma * dt;
+    }
+
+    /// Innovation, its covariance's inverse, Mahalanobis distance squared and Euclidean
+    /// distance; None when the covariance is singular.
+    fn innovation(
+        &self,
+        m: &CircleMeasurement,
+        cfg: &PerceptionConfig,
+    ) -> Option<(Vector2<f64>, Matrix2<f64>, f64, f64)> {
+        let z = Vector2::new(m.centre[0], m.centre[1]);
+        let y = z - H * self.state;
+        let s = H * self.cov * H.transpose() + self.measurement_covariance(m, cfg);
+        let s_inv = s.try_inverse()?;
+        let d2 = (y.transpose() * s_inv * y)[(0, 0)];
+        Some((y, s_inv, d2, y.norm()))
+    }
+
+    fn gated_distance(&self, m: &CircleMeasurement, cfg: &PerceptionConfig) -> Option<f64> {
+        let (_, _, d2, d) = self.innovation(m, cfg)?;
+        (d <= cfg.gate_max_distance && (d2 <= cfg.gate_chi2 || d <= cfg.gate_min_distance))
+            .then_some(d)
+    }
+
+    fn update(&mut self, m: &CircleMeasurement, cfg: &PerceptionConfig) {
+        if let Some((y, s_inv, _, _)) = self.innovation(m, cfg) {
+            let r = self.measurement_covariance(m, cfg);
+            let k = self.cov * H.transpose() * s_inv;
+            let i_kh = Matrix4::identity() - k * H;
+            self.state += k * y;
+            self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
+        }
+        let use_radius = match (self.kind, m.kind) {
+            (_, ObstacleKind::Post) => {
+                self.kind = ObstacleKind::Post;
+                true
+            }
+            (ObstacleKind::Post, _) => false,
+            _ => true,
+        };
+        if use_radius {
+            let var = m.radius_variance + cfg.range_noise_sigma * cfg.range_noise_sigma;
+            let gain = self.radius_var / (self.radius_var + var);
+            self.radius += gain * (m.radius - self.radius);
+            self.radius_var *= 1.0 - gain;
+        }
+        self.life.record(true, cfg);
+    }
+
+    fn reported_velocity(&self, cfg: &PerceptionConfig) -> [f64; 2] {
+        let v = Vector2::new(self.state[2], self.state[3]);
+        if v.norm() < cfg.velocity_dead_band {
+            return [0.0, 0.0];
+        }
+        if cfg.velocity_significance_chi2 > 0.0 {
+            let pvv: Matrix2<f64> = self.cov.fixed_view::<2, 2>(2, 2).into_owned();
+            if let Some(inv) = pvv.try_inverse() {
+                let m2 = (v.transpose() * inv * v)[(0, 0)];
+                if m2 < cfg.velocity_significance_chi2 {
+                    return [0.0, 0.0];
+                }
+            }
+        }
+        [v[0], v[1]]
+    }
+}
+
+/// A wall: the latest segment associated with it (walls are taken as static).
+#[derive(Clone, Debug)]
+struct WallTrack {
+    id: u64,
+    segment: SegmentMeasurement,
+    life: Life,
+}
+
+/// Association cost of a new segment to a wall (offset plus gap, metres), or None when
+/// outside the gates.
+fn wall_cost(
+    old: &SegmentMeasurement,
+    new: &SegmentMeasurement,
+    cfg: &PerceptionConfig,
+) -> Option<f64> {
+    let len = old.length();
+    if len <= 0.0 {
+        return None;
+    }
+    let d = [(old.p1[0] - old.p0[0]) / len, (old.p1[1] - old.p0[1]) / len];
+    let nl = new.length();
+    if nl <= 0.0 {
+        return None;
+    }
+    let e = [(new.p1[0] - new.p0[0]) / nl, (new.p1[1] - new.p0[1]) / nl];
+    // Angle between the undirected lines.
+    let sin = (d[0] * e[1] - d[1] * e[0]).abs();
+    let cos = (d[0] * e[0] + d[1] * e[1]).abs();
+    if sin.atan2(cos) > cfg.wall_angle_gate_deg.to_radians() {
+        return None;
+    }
+    let mid = [0.5 * (new.p0[0] + new.p1[0]), 0.5 * (new.p0[1] + new.p1[1])];
+    let offset = ((mid[0] - old.p0[0]) * d[1] - (mid[1] - old.p0[1]) * d[0]).abs();
+    if offset > cfg.wall_offset_gate {
+        return None;
+    }
+    let t = |p: [f64; 2]| (p[0] - old.p0[0]) * d[0] + (p[1] - old.p0[1]) * d[1];
+    let (ta, tb) = (t(new.p0), t(new.p1));
+    let (lo, hi) = (ta.min(tb), ta.max(tb));
+    let gap = (lo - len).max(-hi).max(0.0);
+    (gap <= cfg.wall_gap_gate).then_some(offset + gap)
+}
+
+/// Greedy global nearest neighbour: pairs (track, measurement) by increasing cost.
+fn assign(
+    mut candidates: Vec<(usize, usize, f64)>,
+    tracks: usize,
+    measurements: usize,
+) -> Vec<Option<usize>> {
+    candidates.sort_by(|a, b| a.2.total_cmp(&b.2));
+    let mut track_of = vec![None; measurements];
+    let mut taken = vec![false; tracks];
+    for (t, m, _) in candidates {
+        if !taken[t] && track_of[m].is_none() {
+            taken[t] = true;
+            track_of[m] = Some(t);
+        }
+    }
+    track_of
+}
+
+/// The perception pipeline with its tracks: feed it every scan in time order.
+#[derive(Clone, Debug)]
+pub struct Perception {
+    cfg: PerceptionConfig,
+    tracks: Vec<PointTrack>,
+    walls: Vec<WallTrack>,
+    next_id: u64,
+    last_stamp: Option<f64>,
+}
+
+impl Perception {
+    pub fn new(cfg: PerceptionConfig) -> Result<Self, PerceptionError> {
+        cfg.validate()?;
+        Ok(Perception {
+            cfg,
+            tracks: Vec::new(),
+            walls: Vec::new(),
+            next_id: 1,
+            last_stamp: None,
+        })
+    }
+
+    pub fn config(&self) -> &PerceptionConfig {
+        &self.cfg
+    }
+
+    /// Forgets every track (ids keep increasing).
+    pub fn reset(&mut self) {
+        self.tracks.clear();
+        self.walls.clear();
+        self.last_stamp = None;
+    }
+
+    /// Detects and tracks one scan; `mount` is the laser's pose in the vehicle frame,
+    /// `pose` the vehicle's in the world frame at the scan's stamp. Stamps must
+    /// increase. A refused scan leaves the tracks unchanged.
+    pub fn update(
+        &mut self,
+        scan: &Scan<'_>,
+        mount: &Pose2,
+        pose: &Pose2,
+    ) -> Result<PerceptionOutput, PerceptionError> {
+        self.check_stamp(scan.stamp)?;
+        let detections = detect(scan, mount, pose, &self.cfg)?;
+        self.update_detections(&detections, pose)
+    }
+
+    /// Tracks one scan's detections (from [`detect`], e.g. kept for plotting).
+    pub fn update_detections(
+        &mut self,
+        detections: &Detections,
+        pose: &Pose2,
+    ) -> Result<PerceptionOutput, PerceptionError> {
+        let stamp = detections.stamp;
+        check_finite("stamp", stamp)?;
+        pose.validate("pose.x", "pose.y", "pose.yaw")?;
+        self.check_stamp(stamp)?;
+        let dt = self.last_stamp.map_or(0.0, |last| stamp - last);
+        self.last_stamp = Some(stamp);
+        let cfg = &self.cfg;
+
+        // Posts and blobs.
+        for t in &mut self.tracks {
+            t.predict(dt, cfg);
+        }
+        let mut candidates = Vec::new();
+        for (ti, t) in self.tracks.iter().enumerate() {
+            for (mi, m) in detections.circles.iter().enumerate() {
+                if let Some(d) = t.gated_distance(m, cfg) {
+                    candidates.push((ti, mi, d));
+                }
+            }
+        }
+        let track_of = assign(candidates, self.tracks.len(), detections.circles.len());
+        let mut updated = vec![false; self.tracks.len()];
+        for (m, t) in detections.circles.iter().zip(&track_of) {
+            if let Some(ti) = t {
+                if let Some(track) = self.tracks.get_mut(*ti) {
+                    track.update(m, cfg);
+                }
+                if let Some(u) = updated.get_mut(*ti) {
+                    *u = true;
+                }
+            }
+        }
+        for (t, u) in self.tracks.iter_mut().zip(&updated) {
+            if !u {
+                t.life.record(false, cfg);
+            }
+        }
+        self.tracks.retain(|t| !t.life.dead(cfg));
+        for (m, t) in detections.circles.iter().zip(&track_of) {
+            if t.is_none() {
+                self.tracks
+                    .push(PointTrack::new(self.next_id, m, stamp, cfg));
+                self.next_id += 1;
+            }
+        }
+
+        // Walls.
+        let mut candidates = Vec::new();
+        for (ti, w) in self.walls.iter().enumerate() {
+            for (mi, s) in detections.segments.iter().enumerate() {
+                if let Some(c) = wall_cost(&w.segment, s, cfg) {
+                    candidates.push((ti, mi, c));
+                }
+            }
+        }
+        let wall_of = assign(candidates, self.walls.len(), detections.segments.len());
+        let mut updated = vec![false; self.walls.len()];
+        for (s, w) in detections.segments.iter().zip(&wall_of) {
+            if let Some(wi) = w
+                && let Some(wall) = self.walls.get_mut(*wi)
+            {
+                wall.segment = *s;
+                wall.life.record(true, cfg);
+                if let Some(u) = updated.get_mut(*wi) {
+                    *u = true;
+                }
+            }
+        }
+        for (w, u) in self.walls.iter_mut().zip(&updated) {
+            if !u {
+                w.life.record(false, cfg);
+            }
+        }
+        self.walls.retain(|w| !w.life.dead(cfg));
+        for (s, w) in detections.segments.iter().zip(&wall_of) {
+            if w.is_none() {
+                self.walls.push(WallTrack {
+                    id: self.next_id,
+                    segment: *s,
+                    life: Life::new(stamp, cfg),
+                });
+                self.next_id += 1;
+            }
+        }
+
+        Ok(self.output(stamp, pose, true))
+    }
+
+    /// Every track, tentative ones included, without the detection radius (for
+    /// diagnostics), as of the last scan.
+    pub fn all_tracks(&self) -> Vec<TrackedObstacle> {
+        let stamp = self.last_stamp.unwrap_or(0.0);
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        self.output(stamp, &pose, false).obstacles
+    }
+
+    fn output(&self, stamp: f64, pose: &Pose2, filtered: bool) -> PerceptionOutput {
+        let cfg = &self.cfg;
+        let within = |x: f64, y: f64, r: f64| {
+            !filtered || (x - pose.x).hypot(y - pose.y) - r <= cfg.detection_radius
+        };
+        let mut obstacles = Vec::new();
+        for t in &self.tracks {
+            if filtered && !t.life.confirmed {
+                continue;
+            }
+            let (x, y) = (t.state[0], t.state[1]);
+            if !within(x, y, t.radius) {
+                continue;
+            }
+            let [vx, vy] = t.reported_velocity(cfg);
+            obstacles.push(TrackedObstacle {
+                id: t.id,
+                part: 0,
+                x,
+                y,
+                radius: t.radius,
+                vx,
+                vy,
+                velocity_estimate: [t.state[2], t.state[3]],
+                kind: t.kind,
+                confidence: t.life.confidence(cfg),
+                age: stamp - t.life.born,
+                hits: t.life.hits,
+                misses: t.life.misses,
+            });
+        }
+        let mut segments = Vec::new();
+        for w in &self.walls {
+            if filtered && !w.life.confirmed {
+                continue;
+            }
+            let s = &w.segment;
+            let confidence = w.life.confidence(cfg);
+            let age = stamp - w.life.born;
+            if !filtered
+                || distance_to_segment([pose.x, pose.y], s.p0, s.p1) <= cfg.detection_radius
+            {
+                segments.push(WallSegment {
+                    id: w.id,
+                    p0: s.p0,
+                    p1: s.p1,
+                    half_thickness: s.half_thickness,
+                    rms: s.rms,
+                    confidence,
+                    age,
+                    hits: w.life.hits,
+                    misses: w.life.misses,
+                });
+            }
+            let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, cfg);
+            for (part, c) in centres.iter().enumerate() {
+                if !within(c[0], c[1], radius) {
+                    continue;
+                }
+                obstacles.push(TrackedObstacle {
+                    id: w.id,
+                    part: u32::try_from(part).unwrap_or(u32::MAX),
+                    x: c[0],
+                    y: c[1],
+                    radius,
+                    vx: 0.0,
+                    vy: 0.0,
+                    velocity_estimate: [0.0, 0.0],
+                    kind: ObstacleKind::WallPiece,
+                    confidence,
+                    age,
+                    hits: w.life.hits,
+                    misses: w.life.misses,
+                });
+            }
+        }
+        obstacles.sort_by_key(|o| (o.id, o.part));
+        segments.sort_by_key(|s| s.id);
+        PerceptionOutput {
+            stamp,
+            obstacles,
+            segments,
+        }
+    }
+
+    fn check_stamp(&self, stamp: f64) -> Result<(), PerceptionError> {
+        check_finite("stamp", stamp)?;
+        match self.last_stamp {
+            Some(previous) if stamp <= previous => {
+                Err(PerceptionError::StampNotIncreasing { stamp, previous })
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn m_of_n_birth_and_k_miss_deletion() {
+        let cfg = PerceptionConfig::default();
+        let mut life = Life::new(0.0, &cfg);
+        life.record(false, &cfg);
+        life.record(true, &cfg);
+        assert!(!life.confirmed);
+        life.record(true, &cfg);
+        assert!(life.confirmed);
+        for _ in 0..cfg.delete_misses - 1 {
+            life.record(false, &cfg);
+        }
+        assert!(!life.dead(&cfg));
+        life.record(false, &cfg);
+        assert!(life.dead(&cfg));
+
+        let mut tentative = Life::new(0.0, &cfg);
+        for _ in 0..cfg.birth_window - 1 {
+            tentative.record(false, &cfg);
+        }
+        assert!(tentative.dead(&cfg));
+    }
+
+    #[test]
+    fn wall_association_gates() {
+        let cfg = PerceptionConfig::default();
+        let seg = |p0: [f64; 2], p1: [f64; 2]| SegmentMeasurement {
+            p0,
+            p1,
+            half_thickness: 0.0,
+            rms: 0.0,
+            points: 10,
+            cluster: 0,
+        };
+        let old = seg([0.0, 0.0], [5.0, 0.0]);
+        assert!(wall_cost(&old, &seg([4.0, 0.1], [8.0, 0.1]), &cfg).is_some());
+        assert!(wall_cost(&old, &seg([8.0, 0.1], [4.0, 0.1]), &cfg).is_some());
+        assert!(wall_cost(&old, &seg([7.0, 0.0], [9.0, 0.0]), &cfg).is_none());
+        assert!(wall_cost(&old, &seg([1.0, 1.0], [4.0, 1.0]), &cfg).is_none());
+        assert!(wall_cost(&old, &seg([1.0, 0.0], [4.0, 2.0]), &cfg).is_none());
+    }
+}

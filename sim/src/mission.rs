@@ -1,0 +1,38 @@
+//! What the controller is told about a scenario: the mission (datum, start, goal) and
+//! the vehicle's calibration (geometry, antenna and laser mounting), exactly as a
+//! field team would configure the car. Nothing else of the scenario (obstacles,
+//! noise) reaches the controller except through its sensors.
+
+use ugv_controller::config::{ControllerConfig, Datum, FollowerKind};
+
+use crate::scenario::Scenario;
+
+/// The controller configuration for a scenario, with the follower to use.
+pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> ControllerConfig {
+    let mut cfg = ControllerConfig::default();
+    let m = &mut cfg.mission;
+    m.datum = Datum {
+        latitude: scenario.datum.latitude,
+        longitude: scenario.datum.longitude,
+        altitude: scenario.datum.altitude,
+    };
+    m.start_x = scenario.start.x;
+    m.start_y = scenario.start.y;
+    m.goal_x = scenario.goal.x;
+    m.goal_y = scenario.goal.y;
+    m.goal_heading_deg = scenario.goal.heading_deg;
+    m.goal_tolerance = scenario.goal.tolerance;
+    let v = &mut cfg.vehicle;
+    v.wheelbase = scenario.vehicle.wheelbase;
+    v.max_steer_deg = scenario.vehicle.max_steer_deg;
+    v.max_speed = scenario.vehicle.max_speed;
+    v.radius = scenario.vehicle.radius;
+    v.antenna_x = scenario.gps.antenna_x;
+    v.antenna_y = scenario.gps.antenna_y;
+    v.laser_x = scenario.laser.mount_x;
+    v.laser_y = scenario.laser.mount_y;
+    v.laser_yaw_deg = scenario.laser.mount_yaw_deg;
+    cfg.planner.cruise_speed = cfg.planner.cruise_speed.min(scenario.vehicle.max_speed);
+    cfg.follower.kind = follower;
+    cfg
+}

@@ -1,0 +1,364 @@
+//! The run's figure, like the seed paper's Figure 4: obstacles, the detection radius,
+//! planned paths at several replans, and the driven path with the vehicle's footprint,
+//! as SVG and PNG.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::scenario::{Obstacle, Scenario};
+use crate::vehicle::VehicleState;
+use crate::world::position_at;
+
+/// The font the figure's text is drawn with (Debian package fonts-dejavu-core).
+pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+
+/// Why a figure could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("reading the font {path} (install fonts-dejavu-core): {source}")]
+    Font {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the font {0} is not a usable TrueType font")]
+    BadFont(String),
+    #[error("drawing {path}: {message}")]
+    Draw { path: String, message: String },
+}
+
+/// A planned path at one replanning.
+#[derive(Clone, Debug)]
+pub struct PlannedPath {
+    pub time: f64,
+    pub points: Vec<[f64; 2]>,
+}
+
+/// What the figure shows.
+#[derive(Clone, Debug)]
+pub struct Figure<'a> {
+    pub title: String,
+    pub scenario: &'a Scenario,
+    /// The driven states, in time order, with their times.
+    pub driven: &'a [(f64, VehicleState)],
+    pub plans: &'a [PlannedPath],
+    /// The controller's detection radius around the vehicle, metres.
+    pub detection_radius: f64,
+    /// Seconds between drawn footprints.
+    pub footprint_every: f64,
+}
+
+fn circle_points(x: f64, y: f64, r: f64) -> Vec<(f64, f64)> {
+    (0..=72)
+        .map(|i| {
+            let a = f64::from(i) / 72.0 * std::f64::consts::TAU;
+            (x + r * a.cos(), y + r * a.sin())
+        })
+        .collect()
+}
+
+fn rect_points(cx: f64, cy: f64, len: f64, width: f64, heading: f64) -> Vec<(f64, f64)> {
+    let (c, s) = (heading.cos(), heading.sin());
+    [
+        (-1.0, -1.0),
+        (1.0, -1.0),
+        (1.0, 1.0),
+        (-1.0, 1.0),
+        (-1.0, -1.0),
+    ]
+    .iter()
+    .map(|(a, b)| {
+        let (dx, dy) = (a * len / 2.0, b * width / 2.0);
+        (cx + dx * c - dy * s, cy + dx * s + dy * c)
+    })
+    .collect()
+}
+
+/// Outlines of an obstacle at time `t`.
+fn obstacle_shapes(o: &Obstacle, t: f64) -> Vec<Vec<(f64, f64)>> {
+    match o {
+        Obstacle::Circle {
+            x,
+            y,
+            radius,
+            motion,
+        } => {
+            let (px, py) = position_at(*x, *y, motion, t);
+            vec![circle_points(px, py, *radius)]
+        }
+        Obstacle::Box {
+            x,
+            y,
+            length,
+            width,
+            heading_deg,
+            motion,
+        } => {
+            let (px, py) = position_at(*x, *y, motion, t);
+            vec![rect_points(
+                px,
+                py,
+                *length,
+                *width,
+                heading_deg.to_radians(),
+            )]
+        }
+        Obstacle::Wall { points, thickness } => points
+            .windows(2)
+            .map(|w| {
+                let (dx, dy) = (w[1][0] - w[0][0], w[1][1] - w[0][1]);
+                rect_points(
+                    (w[0][0] + w[1][0]) / 2.0,
+                    (w[0][1] + w[1][1]) / 2.0,
+                    dx.hypot(dy),
+                    *thickness,
+                    dy.atan2(dx),
+                )
+            })
+            .collect(),
+    }
+}
+
+fn moving(o: &Obstacle) -> bool {
+    matches!(
+        o,
+        Obstacle::Circle {
+            motion: Some(_),
+            ..
+        } | Obstacle::Box {
+            motion: Some(_),
+            ..
+        }
+    )
+}
+
+/// The plotted area: everything, padded, with equal scales.
+fn bounds(fig: &Figure<'_>) -> (f64, f64, f64, f64) {
+    let sc = fig.scenario;
+    let mut xs = vec![sc.start.x, sc.goal.x];
+    let mut ys = vec![sc.start.y, sc.goal.y];
+    for (_, s) in fig.driven {
+        xs.push(s.x);
+        ys.push(s.y);
+    }
+    for o in &sc.obstacles {
+        for shape in obstacle_shapes(o, 0.0) {
+            for (x, y) in shape {
+                xs.push(x);
+                ys.push(y);
+            }
+        }
+    }
+    let (lo_x, hi_x) = xs
+        .iter()
+        .fold((f64::MAX, f64::MIN), |a, v| (a.0.min(*v), a.1.max(*v)));
+    let (lo_y, hi_y) = ys
+        .iter()
+        .fold((f64::MAX, f64::MIN), |a, v| (a.0.min(*v), a.1.max(*v)));
+    let pad = 4.0;
+    (lo_x - pad, hi_x + pad, lo_y - pad, hi_y + pad)
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &Figure<'_>,
+    b: (f64, f64, f64, f64),
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |err: DrawingAreaErrorKind<DB::ErrorType>| err.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(&fig.title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(b.0..b.1, b.2..b.3)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("x (East), m")
+        .y_desc("y (North), m")
+        .light_line_style(RGBColor(235, 235, 235))
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(e)?;
+    let sc = fig.scenario;
+    let end_time = fig.driven.last().map_or(0.0, |d| d.0);
+
+    // Obstacles: filled at t = 0; moving ones also outlined where they ended.
+    let obstacle_color = RGBColor(200, 80, 60);
+    let mut first = true;
+    for o in &sc.obstacles {
+        for shape in obstacle_shapes(o, 0.0) {
+            let series = chart
+                .draw_series(std::iter::once(Polygon::new(
+                    shape,
+                    obstacle_color.mix(0.55).filled(),
+                )))
+                .map_err(e)?;
+            if first {
+                series.label("obstacle").legend(move |(x, y)| {
+                    Rectangle::new(
+                        [(x, y - 5), (x + 14, y + 5)],
+                        obstacle_color.mix(0.55).filled(),
+                    )
+                });
+                first = false;
+            }
+        }
+        if moving(o) {
+            for shape in obstacle_shapes(o, end_time) {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        shape,
+                        obstacle_color.stroke_width(1),
+                    )))
+                    .map_err(e)?;
+            }
+        }
+    }
+
+    // Planned paths (at most 8, spread over the run) with the detection radius
+    // around the vehicle when each was made.
+    let step = (fig.plans.len() / 8).max(1);
+    let plan_color = RGBColor(40, 150, 70);
+    let radius_color = RGBColor(120, 120, 200);
+    let mut labelled = false;
+    for p in fig.plans.iter().step_by(step) {
+        let series = chart
+            .draw_series(LineSeries::new(
+                p.points.iter().map(|q| (q[0], q[1])),
+                plan_color.mix(0.7).stroke_width(1),
+            ))
+            .map_err(e)?;
+        if !labelled {
+            series
+                .label("planned path (replans)")
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], plan_color));
+        }
+        if let Some((_, s)) = fig.driven.iter().find(|(t, _)| *t >= p.time) {
+            let series = chart
+                .draw_series(std::iter::once(PathElement::new(
+                    circle_points(s.x, s.y, fig.detection_radius),
+                    radius_color.mix(0.5).stroke_width(1),
+                )))
+                .map_err(e)?;
+            if !labelled {
+                series
+                    .label(format!("detection radius {} m", fig.detection_radius))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 14, y)], radius_color)
+                    });
+            }
+        }
+        labelled = true;
+    }
+
+    // The driven path and footprints.
+    let path_color = RGBColor(30, 80, 200);
+    chart
+        .draw_series(LineSeries::new(
+            fig.driven.iter().map(|(_, s)| (s.x, s.y)),
+            path_color.stroke_width(3),
+        ))
+        .map_err(e)?
+        .label("driven path (rear axle)")
+        .legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 14, y)], path_color.stroke_width(3))
+        });
+    let mut next = 0.0;
+    let mut first_fp = true;
+    for (t, s) in fig.driven {
+        if *t + 1e-9 < next {
+            continue;
+        }
+        next = t + fig.footprint_every;
+        let pts: Vec<(f64, f64)> = s
+            .footprint_corners(&sc.vehicle)
+            .iter()
+            .chain(s.footprint_corners(&sc.vehicle).first())
+            .copied()
+            .collect();
+        let series = chart
+            .draw_series(std::iter::once(PathElement::new(
+                pts,
+                BLACK.mix(0.6).stroke_width(1),
+            )))
+            .map_err(e)?;
+        if first_fp {
+            series.label("footprint").legend(|(x, y)| {
+                Rectangle::new([(x, y - 4), (x + 14, y + 4)], BLACK.stroke_width(1))
+            });
+            first_fp = false;
+        }
+    }
+    chart
+        .draw_series([
+            Circle::new((sc.start.x, sc.start.y), 6, BLACK.filled()),
+            Circle::new((sc.goal.x, sc.goal.y), 6, RGBColor(0, 140, 0).filled()),
+        ])
+        .map_err(e)?;
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (sc.goal.x, sc.goal.y),
+            1,
+            RGBColor(0, 140, 0),
+        )))
+        .map_err(e)?
+        .label("start (black) / goal (green)")
+        .legend(|(x, y)| Circle::new((x + 7, y), 5, RGBColor(0, 140, 0).filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(e)?;
+    root.present().map_err(e)?;
+    Ok(())
+}
+
+fn register_font() -> Result<(), PlotError> {
+    static REGISTERED: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    let result = REGISTERED.get_or_init(|| {
+        let bytes = std::fs::read(FONT).map_err(|e| e.to_string())?;
+        // plotters keeps the font for the life of the process.
+        let leaked: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        plotters::style::register_font("sans-serif", FontStyle::Normal, leaked)
+            .map_err(|_| "bad font".to_owned())
+    });
+    match result {
+        Ok(()) => Ok(()),
+        Err(m) if m == "bad font" => Err(PlotError::BadFont(FONT.to_owned())),
+        Err(m) => Err(PlotError::Font {
+            path: FONT.to_owned(),
+            source: std::io::Error::other(m.clone()),
+        }),
+    }
+}
+
+/// Draw the figure to an SVG and a PNG file.
+pub fn render(fig: &Figure<'_>, svg: &Path, png: &Path) -> Result<(), PlotError> {
+    register_font()?;
+    let b = bounds(fig);
+    let width = 1100u32;
+    let height =
+        ((f64::from(width) - 62.0) * (b.3 - b.2) / (b.1 - b.0) + 90.0).clamp(300.0, 2400.0) as u32;
+    {
+        let root = SVGBackend::new(svg, (width, height)).into_drawing_area();
+        draw(&root, fig, b).map_err(|message| PlotError::Draw {
+            path: svg.display().to_string(),
+            message,
+        })?;
+    }
+    let root = BitMapBackend::new(png, (width, height)).into_drawing_area();
+    draw(&root, fig, b).map_err(|message| PlotError::Draw {
+        path: png.display().to_string(),
+        message,
+    })
+}

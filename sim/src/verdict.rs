@@ -1,0 +1,188 @@
+//! The verdict of a run: the simulator's report joined with the controller's trace,
+//! judged against the scenario's success criteria, written with its figure.
+
+use std::path::Path;
+
+use serde::Serialize;
+use ugv_controller::trace::Trace;
+
+use crate::plot::{Figure, PlannedPath, render};
+use crate::run::{Outcome, RunReport};
+use crate::scenario::Scenario;
+use crate::vehicle::VehicleState;
+
+/// Below this speed at the end, a stop counts as a stop, m/s.
+const STOPPED: f64 = 0.05;
+
+/// What the controller side contributes.
+#[derive(Clone, Debug, Serialize)]
+pub struct ControllerSummary {
+    /// The controller's final mode (as it reported it).
+    pub mode: serde_json::Value,
+    pub tracking_error_rms: f64,
+    pub replans: usize,
+    pub infeasible_replans: usize,
+}
+
+/// The verdict of one run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Verdict {
+    /// "hil" or "sil".
+    pub mode: String,
+    pub passed: bool,
+    /// Why it did not pass (empty when it did).
+    pub failures: Vec<String>,
+    pub goal_reached: bool,
+    pub collision: bool,
+    pub time: f64,
+    #[serde(flatten)]
+    pub report: RunReport,
+    pub controller: Option<ControllerSummary>,
+}
+
+fn outcome_time(o: &Outcome) -> f64 {
+    match o {
+        Outcome::GoalReached { time }
+        | Outcome::Collision { time, .. }
+        | Outcome::TimeLimit { time }
+        | Outcome::Stopped { time, .. } => *time,
+    }
+}
+
+impl Verdict {
+    pub fn judge(
+        mode: &str,
+        scenario: &Scenario,
+        report: RunReport,
+        trace: Option<&Trace>,
+    ) -> Verdict {
+        let goal_reached = matches!(report.outcome, Outcome::GoalReached { .. });
+        let collision = matches!(report.outcome, Outcome::Collision { .. });
+        let mut failures = Vec::new();
+        if collision {
+            failures.push("collision".to_owned());
+        }
+        if scenario.success.reach_goal && !goal_reached {
+            failures.push(format!(
+                "goal not reached ({:.2} m away)",
+                report.distance_to_goal
+            ));
+        }
+        if !scenario.success.reach_goal && report.final_state.v.abs() > STOPPED {
+            failures.push(format!(
+                "not stopped at the end ({:.2} m/s)",
+                report.final_state.v
+            ));
+        }
+        let closest = report
+            .min_clearance
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
+        if closest < scenario.success.min_clearance {
+            failures.push(format!(
+                "clearance {closest:.2} m below the required {:.2} m",
+                scenario.success.min_clearance
+            ));
+        }
+        if let Outcome::Stopped { reason, .. } = &report.outcome {
+            failures.push(format!("stopped: {reason}"));
+        }
+        let controller = trace.map(|t| ControllerSummary {
+            mode: serde_json::to_value(&t.mode).unwrap_or_default(),
+            tracking_error_rms: t.tracking_error_rms,
+            replans: t.plans.len(),
+            infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
+        });
+        Verdict {
+            mode: mode.to_owned(),
+            passed: failures.is_empty(),
+            failures,
+            goal_reached,
+            collision,
+            time: outcome_time(&report.outcome),
+            report,
+            controller,
+        }
+    }
+}
+
+/// Why results could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultsError {
+    #[error("writing {path}: {source}")]
+    Write {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("encoding the verdict: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+}
+
+fn write(path: &Path, text: &str) -> Result<(), ResultsError> {
+    std::fs::write(path, text).map_err(|source| ResultsError::Write {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Write `verdict.json`, `trace.json` (when there is one), `figure.svg` and
+/// `figure.png` into `dir`.
+pub fn write_results(
+    dir: &Path,
+    scenario: &Scenario,
+    verdict: &Verdict,
+    driven: &[(f64, VehicleState)],
+    trace: Option<&Trace>,
+    detection_radius: f64,
+) -> Result<(), ResultsError> {
+    std::fs::create_dir_all(dir).map_err(|source| ResultsError::Write {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    write(
+        &dir.join("verdict.json"),
+        &serde_json::to_string_pretty(verdict)?,
+    )?;
+    if let Some(t) = trace {
+        write(&dir.join("trace.json"), &serde_json::to_string(t)?)?;
+    }
+    let plans: Vec<PlannedPath> = trace
+        .map(|t| {
+            t.plans
+                .iter()
+                .filter(|p| p.feasible)
+                .map(|p| PlannedPath {
+                    time: p.time,
+                    points: p.path.clone(),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let title = format!(
+        "{} ({}): {}",
+        scenario.name,
+        verdict.mode.to_uppercase(),
+        if verdict.passed {
+            "passed".to_owned()
+        } else {
+            verdict.failures.join(", ")
+        }
+    );
+    render(
+        &Figure {
+            title,
+            scenario,
+            driven,
+            plans: &plans,
+            detection_radius,
+            footprint_every: 2.0,
+        },
+        &dir.join("figure.svg"),
+        &dir.join("figure.png"),
+    )?;
+    Ok(())
+}
