@@ -11,6 +11,10 @@ bash scripts/install-deps.sh
 source scripts/env.sh
 
 cargo build --workspace --all-targets --locked
+# The real-time runs on vcan (ugv-sim with the real controller binary) use release
+# binaries: debug builds are too slow for the 100 ms watchdogs inside an emulated VM.
+cargo build --workspace --release --locked
+export UGV_BIN_DIR="$PWD/target/release"
 
 echo "== tests on the host (everything but vcan_*)"
 cargo nextest run --workspace --locked --no-fail-fast -E 'not binary(/^vcan_/)'

@@ -55,7 +55,7 @@ pub fn scan_of(frame: &firmware_bridge::laser::LaserFrame, stamp: f64) -> Scan<'
 }
 
 /// The controller's mode.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "mode", rename_all = "snake_case")]
 pub enum Mode {
     /// Heartbeat idle until GPS (with heading), laser and both ECUs are there.
@@ -71,7 +71,7 @@ pub enum Mode {
 }
 
 /// One control tick, for the report, the plots and ANFIS training data.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, serde::Deserialize)]
 pub struct Sample {
     pub t: f64,
     pub pose: Pose,

@@ -9,7 +9,7 @@ use crate::localisation::Pose;
 use crate::planner::{self, Interval, PlanOptions, PlanProblem, Trajectory};
 
 /// An obstacle for the planner, in the world frame.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Circle {
     pub x: f64,
     pub y: f64,
@@ -64,7 +64,7 @@ fn wrap(a: f64) -> f64 {
 }
 
 /// What the follower sees: errors against the path at the vehicle's position.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FollowInputs {
     /// Signed lateral error (left of the path positive), metres.
     pub e_y: f64,
@@ -118,7 +118,7 @@ impl SteeringLaw {
 }
 
 /// One replanning, kept for the run's figure and report.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PlanRecord {
     pub time: f64,
     pub feasible: bool,

@@ -12,7 +12,7 @@ use crate::config::ControllerConfig;
 const COG_MIN_SPEED: f64 = 0.8;
 
 /// The estimated state of the rear axle in the world frame.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pose {
     pub x: f64,
     pub y: f64,

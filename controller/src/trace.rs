@@ -7,7 +7,7 @@ use serde::Serialize;
 use crate::core::{Controller, Mode, Sample};
 use crate::guidance::{Circle, PlanRecord};
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
 pub struct Trace {
     pub mode: Mode,
     pub duration: f64,

@@ -346,7 +346,7 @@ fn a_killed_publisher_is_cleaned_up_and_its_service_reused() -> Result<()> {
     let ready = BufReader::new(stdout)
         .lines()
         .map_while(|l| l.ok())
-        .any(|l| l.trim() == "ready");
+        .any(|l| l.contains("LASER-CHILD-READY"));
     child.kill()?;
     child.wait()?;
     ensure!(ready, "the crashing publisher never got ready");
@@ -362,7 +362,7 @@ fn a_killed_publisher_is_cleaned_up_and_its_service_reused() -> Result<()> {
 }
 
 /// The child side of `a_killed_publisher_is_cleaned_up_and_its_service_reused`: does
-/// nothing unless started by it; then publishes, says "ready" and waits to be killed.
+/// nothing unless started by it; then publishes, says it is ready and waits to be killed.
 #[test]
 fn crashing_publisher() -> Result<()> {
     let Ok(service) = std::env::var(CRASH_ENV) else {
@@ -370,7 +370,7 @@ fn crashing_publisher() -> Result<()> {
     };
     let publisher = LaserPublisher::new(&service)?;
     publisher.publish(&make_frame(1))?;
-    println!("ready");
+    println!("LASER-CHILD-READY");
     std::io::stdout().flush()?;
     std::thread::sleep(Duration::from_secs(60));
     bail!("was not killed")

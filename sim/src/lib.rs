@@ -4,6 +4,7 @@
 //! ones would — stepped on a fixed timestep, in real time (HIL) or lockstep (SIL).
 
 pub mod epoch;
+pub mod hil;
 /// Ticks on absolute deadlines and lockstep (shared with the controller).
 pub use firmware_bridge::clock;
 pub mod devices;

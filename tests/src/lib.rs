@@ -43,18 +43,27 @@ pub fn can_utils(tool: &str, args: &[&str]) -> anyhow::Result<Output> {
     })
 }
 
-/// A binary of the workspace, built by `cargo build --workspace` beside this test
-/// (target/<profile>/NAME).
+/// A binary of the workspace: from `UGV_BIN_DIR` when set (the test command points
+/// it at the release build for the real-time runs), else the one built by
+/// `cargo build --workspace` beside this test (target/<profile>/NAME).
 pub fn workspace_bin(name: &str) -> anyhow::Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    // target/<profile>/deps/<test>-<hash>
-    let dir = exe.parent().and_then(|deps| deps.parent()).ok_or_else(|| {
-        anyhow::anyhow!("cannot locate the target directory from {}", exe.display())
-    })?;
+    let dir = match std::env::var_os("UGV_BIN_DIR") {
+        Some(dir) => PathBuf::from(dir),
+        None => {
+            // target/<profile>/deps/<test>-<hash>
+            let exe = std::env::current_exe()?;
+            exe.parent()
+                .and_then(|deps| deps.parent())
+                .map(std::path::Path::to_path_buf)
+                .ok_or_else(|| {
+                    anyhow::anyhow!("cannot locate the target directory from {}", exe.display())
+                })?
+        }
+    };
     let bin = dir.join(name);
     anyhow::ensure!(
         bin.is_file(),
-        "{} is missing: build the workspace first (cargo build --workspace)",
+        "{} is missing: build the workspace first (cargo build --workspace, --release for UGV_BIN_DIR=target/release)",
         bin.display()
     );
     Ok(bin)
