@@ -25,24 +25,7 @@ pub enum ConfigError {
     },
 }
 
-/// Geodetic origin of the world frame (x East, y North).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Datum {
-    pub latitude: f64,
-    pub longitude: f64,
-    pub altitude: f64,
-}
-
-impl Default for Datum {
-    fn default() -> Self {
-        Datum {
-            latitude: 37.2307,
-            longitude: -77.4197,
-            altitude: 40.0,
-        }
-    }
-}
+pub use firmware_bridge::geodesy::Datum;
 
 /// Where to go: the straight line from `start` to `goal` is the reference the planner
 /// keeps close to (the paper's L).

@@ -44,13 +44,8 @@ impl Localiser {
     pub fn new(
         cfg: &ControllerConfig,
     ) -> Result<Localiser, firmware_bridge::geodesy::GeodesyError> {
-        let d = cfg.mission.datum;
         Ok(Localiser {
-            frame: LocalFrame::new(Geodetic {
-                lat_deg: d.latitude,
-                lon_deg: d.longitude,
-                height_m: d.altitude,
-            })?,
+            frame: LocalFrame::new(cfg.mission.datum.geodetic())?,
             wheelbase: cfg.vehicle.wheelbase,
             antenna: (cfg.vehicle.antenna_x, cfg.vehicle.antenna_y),
             pose: None,

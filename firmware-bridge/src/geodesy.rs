@@ -40,6 +40,41 @@ pub enum GeodesyError {
     },
 }
 
+/// The geodetic origin of a local world frame (x East, y North, z Up), as written in
+/// scenario and controller configuration files.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Datum {
+    /// Degrees, WGS-84.
+    pub latitude: f64,
+    /// Degrees, WGS-84.
+    pub longitude: f64,
+    /// Metres above the ellipsoid.
+    pub altitude: f64,
+}
+
+impl Default for Datum {
+    /// Virginia State University, Petersburg VA (the seed paper's authors).
+    fn default() -> Self {
+        Datum {
+            latitude: 37.2307,
+            longitude: -77.4197,
+            altitude: 40.0,
+        }
+    }
+}
+
+impl Datum {
+    /// The datum as a geodetic position.
+    pub fn geodetic(&self) -> Geodetic {
+        Geodetic {
+            lat_deg: self.latitude,
+            lon_deg: self.longitude,
+            height_m: self.altitude,
+        }
+    }
+}
+
 /// A WGS-84 geodetic position.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Geodetic {

@@ -3,7 +3,7 @@
 //! field team would configure the car. Nothing else of the scenario (obstacles,
 //! noise) reaches the controller except through its sensors.
 
-use ugv_controller::config::{ControllerConfig, Datum, FollowerKind};
+use ugv_controller::config::{ControllerConfig, FollowerKind};
 
 use crate::scenario::Scenario;
 
@@ -11,11 +11,7 @@ use crate::scenario::Scenario;
 pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> ControllerConfig {
     let mut cfg = ControllerConfig::default();
     let m = &mut cfg.mission;
-    m.datum = Datum {
-        latitude: scenario.datum.latitude,
-        longitude: scenario.datum.longitude,
-        altitude: scenario.datum.altitude,
-    };
+    m.datum = scenario.datum;
     m.start_x = scenario.start.x;
     m.start_y = scenario.start.y;
     m.goal_x = scenario.goal.x;

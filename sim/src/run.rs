@@ -341,14 +341,6 @@ impl<B: Can> Sim<B> {
     pub fn tick_lateness(&self) -> Jitter {
         Jitter::of(self.lateness.clone())
     }
-
-    /// The node of one ECU (for tests and the terminal view).
-    pub fn node(&self, kind: EcuKind) -> &EcuNode {
-        match kind {
-            EcuKind::Steering => &self.steering.node,
-            EcuKind::Throttle => &self.throttle.node,
-        }
-    }
 }
 
 /// The result of a run, as JSON for people and CI.
@@ -389,36 +381,6 @@ impl<B: Can> Sim<B> {
             throttle_can,
             report_jitter: self.report_jitter(),
             tick_lateness: self.tick_lateness(),
-        }
-    }
-
-    /// Step on `clock` until the run is over or `stop` is raised; `status` sees a
-    /// snapshot every `status_every` simulated seconds.
-    pub fn run<C: crate::clock::Clock>(
-        &mut self,
-        clock: &mut C,
-        stop: &std::sync::atomic::AtomicBool,
-        status_every: f64,
-        status: &mut dyn FnMut(&Snapshot),
-    ) -> Result<Outcome, SimError> {
-        let every = ((status_every / self.dt).round() as u64).max(1);
-        loop {
-            if stop.load(std::sync::atomic::Ordering::Relaxed) {
-                return Ok(Outcome::Stopped {
-                    time: self.time(),
-                    reason: "stopped by signal".to_owned(),
-                });
-            }
-            let k = self.next_tick();
-            let late = clock.wait_tick(k);
-            let wall = clock.now();
-            let outcome = self.step(wall, late)?;
-            if k % every == 0 {
-                status(&self.snapshot());
-            }
-            if let Some(o) = outcome {
-                return Ok(o);
-            }
         }
     }
 }

@@ -34,28 +34,7 @@ pub enum ScenarioError {
     },
 }
 
-/// Geodetic datum of the world frame's origin (x East, y North, z Up).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Datum {
-    /// Degrees, WGS-84.
-    pub latitude: f64,
-    /// Degrees, WGS-84.
-    pub longitude: f64,
-    /// Metres above the ellipsoid.
-    pub altitude: f64,
-}
-
-impl Default for Datum {
-    /// Virginia State University, Petersburg VA (the seed paper's authors).
-    fn default() -> Self {
-        Datum {
-            latitude: 37.2307,
-            longitude: -77.4197,
-            altitude: 40.0,
-        }
-    }
-}
+pub use firmware_bridge::geodesy::Datum;
 
 /// A pose in the world frame: metres, heading counter-clockwise from +x (East).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -41,6 +41,15 @@ fn vec2(x: f64, y: f64) -> Vector {
     Vector::new(x as Real, y as Real)
 }
 
+/// A moving obstacle rides a kinematic body, a static one a fixed body.
+fn body_for(motion: &Option<Motion>) -> RigidBodyBuilder {
+    if motion.is_some() {
+        RigidBodyBuilder::kinematic_position_based()
+    } else {
+        RigidBodyBuilder::fixed()
+    }
+}
+
 /// Position of a moving obstacle's reference point at time `t`, from its start `(x0, y0)`.
 pub fn position_at(x0: f64, y0: f64, motion: &Option<Motion>, t: f64) -> (f64, f64) {
     match motion {
@@ -99,12 +108,7 @@ impl World {
                     radius,
                     motion,
                 } => (
-                    if motion.is_some() {
-                        RigidBodyBuilder::kinematic_position_based()
-                    } else {
-                        RigidBodyBuilder::fixed()
-                    }
-                    .translation(vec2(*x, *y)),
+                    body_for(motion).translation(vec2(*x, *y)),
                     vec![ColliderBuilder::ball(*radius as Real)],
                 ),
                 Obstacle::Box {
@@ -115,12 +119,8 @@ impl World {
                     heading_deg,
                     motion,
                 } => (
-                    if motion.is_some() {
-                        RigidBodyBuilder::kinematic_position_based()
-                    } else {
-                        RigidBodyBuilder::fixed()
-                    }
-                    .pose(Pose::new(vec2(*x, *y), heading_deg.to_radians() as Real)),
+                    body_for(motion)
+                        .pose(Pose::new(vec2(*x, *y), heading_deg.to_radians() as Real)),
                     vec![ColliderBuilder::cuboid(
                         (*length / 2.0) as Real,
                         (*width / 2.0) as Real,
@@ -185,11 +185,6 @@ impl World {
         self.physics.step();
     }
 
-    /// The simulated time the obstacles are at.
-    pub fn time(&self) -> f64 {
-        self.time
-    }
-
     /// Move every moving obstacle to where it is at time `t`.
     pub fn set_time(&mut self, t: f64) {
         self.time = t;
@@ -218,15 +213,6 @@ impl World {
         if moved {
             self.refresh();
         }
-    }
-
-    /// The number of obstacles.
-    pub fn len(&self) -> usize {
-        self.bodies.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.bodies.is_empty()
     }
 
     fn obstacle_of(&self, handle: ColliderHandle) -> Option<usize> {

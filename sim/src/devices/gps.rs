@@ -154,11 +154,7 @@ impl GpsDevice {
         if !(wheelbase_m.is_finite() && wheelbase_m > 0.0) {
             return Err(GpsError::Wheelbase(wheelbase_m));
         }
-        let frame = LocalFrame::new(Geodetic {
-            lat_deg: datum.latitude,
-            lon_deg: datum.longitude,
-            height_m: datum.altitude,
-        })?;
+        let frame = LocalFrame::new(datum.geodetic())?;
         Ok(GpsDevice {
             config: config.clone(),
             frame,

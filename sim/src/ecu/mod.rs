@@ -83,13 +83,6 @@ impl EcuNode {
         }
     }
 
-    pub fn kind(&self) -> EcuKind {
-        match self.ecu {
-            Ecu::Steering(_) => EcuKind::Steering,
-            Ecu::Throttle(_) => EcuKind::Throttle,
-        }
-    }
-
     fn safety(&mut self) -> &mut Safety {
         match &mut self.ecu {
             Ecu::Steering(e) => &mut e.safety,
