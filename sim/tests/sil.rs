@@ -110,3 +110,34 @@ fn gps_degrading_mid_run_stops_the_car_with_an_estop() {
     assert!(v.report.steering_can.safe_state_trips.iter().sum::<u64>() >= 1);
     assert!(v.report.throttle_can.safe_state_trips.iter().sum::<u64>() >= 1);
 }
+
+#[test]
+fn an_anfis_follower_trained_on_a_recorded_run_drives_the_paper_scenario() {
+    use ugv_controller::anfis::{TrainArgs, train_command};
+    let sc = Scenario::paper().expect("embedded scenario");
+    // Record the optimal follower's inputs and commands, as `--record` writes them.
+    let optimal = controller_config(&sc, FollowerKind::Optimal);
+    let run = run_sil(sc.clone(), &optimal).expect("recording run");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("train.csv");
+    std::fs::write(&data, run.trace.training_csv()).expect("write training data");
+    let model = dir.path().join("model.json");
+    let mut args = TrainArgs::new(
+        data,
+        vec!["e_y".into(), "e_theta".into(), "phi_ref".into()],
+        "steer_cmd".into(),
+        model.clone(),
+    );
+    args.mfs = vec![2];
+    args.epochs = 5;
+    let report = train_command(&args).expect("training");
+    assert!(report.training_rmse.iter().all(|e| e.is_finite()));
+    // Drive with the trained model.
+    let mut anfis = controller_config(&sc, FollowerKind::Anfis);
+    anfis.follower.anfis_model = Some(model);
+    let run = run_sil(sc.clone(), &anfis).expect("ANFIS run");
+    let v = Verdict::judge("sil", &sc, run.sim.report(run.outcome), Some(&run.trace));
+    assert!(v.passed, "{:?}", v.failures);
+    let c = v.controller.expect("controller summary");
+    assert!(c.tracking_error_rms < 0.3, "{}", c.tracking_error_rms);
+}
