@@ -1,0 +1,278 @@
+//! The controller's mode machine and safety stops, driven with synthetic inputs: it
+//! waits for its sensors, sends the enable edge, drives, and goes to estop (heartbeat
+//! estop, ECUs disabled with full brake, FAULT_REPORT) on laser silence, a silent ECU
+//! report, an actuator fault or a lost GPS fix; no command ever leaves its limits.
+
+use firmware_bridge::Received;
+use firmware_bridge::geodesy::{Enu, LocalFrame, theta_to_course_deg};
+use firmware_bridge::nmea::{FixQuality, GpsReading};
+use golf_car_can::{
+    ControllerHeartbeatState, FaultReportCode, GolfCarMessage, SteeringReport, SteeringReportFault,
+    ThrottleReport, ThrottleReportFault, ThrottleReportGear,
+};
+use ugv_controller::config::ControllerConfig;
+use ugv_controller::core::{Controller, Mode};
+use ugv_controller::perception::Scan;
+
+struct Rig {
+    cfg: ControllerConfig,
+    ctl: Controller,
+    frame: LocalFrame,
+    ranges: Vec<f32>,
+    out: Vec<GolfCarMessage>,
+}
+
+/// Which inputs keep coming.
+#[derive(Clone, Copy)]
+struct Feed {
+    gps: bool,
+    laser: bool,
+    reports: bool,
+    steering_fault: bool,
+}
+
+const ALL: Feed = Feed {
+    gps: true,
+    laser: true,
+    reports: true,
+    steering_fault: false,
+};
+
+impl Rig {
+    fn new() -> Rig {
+        let cfg = ControllerConfig::default();
+        Rig {
+            ctl: Controller::new(&cfg).expect("controller"),
+            frame: LocalFrame::new(cfg.mission.datum.geodetic()).expect("datum"),
+            cfg,
+            ranges: vec![f32::INFINITY; 541],
+            out: Vec::new(),
+        }
+    }
+
+    /// Tick every 10 ms from `from` to `to` with the given inputs.
+    fn run(&mut self, from: f64, to: f64, feed: Feed) {
+        let mut k = (from / 0.01).round() as u64;
+        while (k as f64) * 0.01 < to - 1e-9 {
+            let now = k as f64 * 0.01;
+            let enabled = matches!(self.ctl.mode(), Mode::Enabling { .. } | Mode::Auto);
+            if feed.reports {
+                let steering = SteeringReport {
+                    enabled,
+                    fault: if feed.steering_fault {
+                        SteeringReportFault::Overcurrent
+                    } else {
+                        SteeringReportFault::None
+                    },
+                    ..SteeringReport::default()
+                };
+                let throttle = ThrottleReport {
+                    enabled,
+                    gear: ThrottleReportGear::Forward,
+                    fault: ThrottleReportFault::None,
+                    ..ThrottleReport::default()
+                };
+                self.ctl.on_can(
+                    now,
+                    &Received::Message(GolfCarMessage::SteeringReport(steering)),
+                );
+                self.ctl.on_can(
+                    now,
+                    &Received::Message(GolfCarMessage::ThrottleReport(throttle)),
+                );
+            }
+            if feed.gps && k % 10 == 0 {
+                let theta = 45f64.to_radians();
+                let ax = self.cfg.vehicle.antenna_x;
+                let g = self.frame.to_geodetic(Enu {
+                    east_m: ax * theta.cos(),
+                    north_m: ax * theta.sin(),
+                    up_m: 0.0,
+                });
+                let reading = GpsReading {
+                    quality: Some(FixQuality::RtkFixed),
+                    lat_deg: Some(g.lat_deg),
+                    lon_deg: Some(g.lon_deg),
+                    altitude_msl_m: Some(g.height_m),
+                    geoid_separation_m: Some(0.0),
+                    heading_deg: Some(theta_to_course_deg(theta)),
+                    speed_mps: Some(0.0),
+                    course_deg: Some(0.0),
+                    ..GpsReading::default()
+                };
+                self.ctl.on_gps(now, &reading);
+            }
+            if feed.laser && k % 2 == 0 {
+                let scan = Scan {
+                    stamp: now,
+                    angle_min: -135f64.to_radians(),
+                    angle_increment: 0.5f64.to_radians(),
+                    range_min: 0.5,
+                    range_max: 20.0,
+                    ranges: &self.ranges,
+                };
+                self.ctl.on_scan(now, &scan);
+            }
+            let msgs = self.ctl.tick(now);
+            self.out.extend(msgs);
+            k += 1;
+        }
+    }
+
+    fn drive(&mut self) {
+        self.run(0.0, 1.0, ALL);
+        assert_eq!(
+            self.ctl.mode(),
+            &Mode::Auto,
+            "drives with every input present"
+        );
+    }
+
+    fn last_heartbeat(&self) -> Option<ControllerHeartbeatState> {
+        self.out.iter().rev().find_map(|m| match m {
+            GolfCarMessage::ControllerHeartbeat(h) => Some(h.state),
+            _ => None,
+        })
+    }
+
+    fn assert_safe_stop(&self, code: FaultReportCode) {
+        assert!(
+            matches!(self.ctl.mode(), Mode::Estop { .. }),
+            "{:?}",
+            self.ctl.mode()
+        );
+        assert_eq!(self.last_heartbeat(), Some(ControllerHeartbeatState::Estop));
+        let (steer, throttle) = self.out.iter().rev().fold((None, None), |acc, m| match m {
+            GolfCarMessage::SteeringCmd(c) if acc.0.is_none() => (Some(*c), acc.1),
+            GolfCarMessage::ThrottleCmd(c) if acc.1.is_none() => (acc.0, Some(*c)),
+            _ => acc,
+        });
+        let (steer, throttle) = (
+            steer.expect("steering command"),
+            throttle.expect("throttle command"),
+        );
+        assert!(!steer.enable && !throttle.enable);
+        assert_eq!((throttle.target_speed, throttle.brake), (0.0, 100.0));
+        assert!(
+            self.out
+                .iter()
+                .any(|m| matches!(m, GolfCarMessage::FaultReport(f) if f.code == code)),
+            "a FAULT_REPORT with {code:?}"
+        );
+    }
+
+    /// Every command ever sent is within the DBC's and the vehicle's limits.
+    fn assert_limits(&self) {
+        let v = &self.cfg.vehicle;
+        for m in &self.out {
+            match m {
+                GolfCarMessage::SteeringCmd(c) => {
+                    assert!(
+                        c.target_angle.abs() <= v.max_steer_deg && c.max_rate >= 0.0,
+                        "{c:?}"
+                    );
+                }
+                GolfCarMessage::ThrottleCmd(c) => {
+                    assert!((0.0..=v.max_speed).contains(&c.target_speed), "{c:?}");
+                    assert!(
+                        (0.0..=100.0).contains(&c.brake) && (0.0..=5.0).contains(&c.accel_limit),
+                        "{c:?}"
+                    );
+                }
+                _ => {}
+            }
+            assert!(m.encode().is_ok(), "{m:?} encodes within the DBC's ranges");
+        }
+    }
+}
+
+#[test]
+fn waits_for_sensors_then_enables_with_an_edge_and_drives() {
+    let mut rig = Rig::new();
+    rig.run(
+        0.0,
+        0.3,
+        Feed {
+            laser: false,
+            ..ALL
+        },
+    );
+    assert_eq!(rig.ctl.mode(), &Mode::WaitingForSensors, "no laser yet");
+    assert_eq!(rig.last_heartbeat(), Some(ControllerHeartbeatState::Idle));
+    rig.run(0.3, 1.5, ALL);
+    assert_eq!(rig.ctl.mode(), &Mode::Auto);
+    // The enable bit went low then high (the explicit enable edge).
+    let bits: Vec<bool> = rig
+        .out
+        .iter()
+        .filter_map(|m| match m {
+            GolfCarMessage::SteeringCmd(c) => Some(c.enable),
+            _ => None,
+        })
+        .collect();
+    let edge = bits
+        .windows(2)
+        .position(|w| !w[0] && w[1])
+        .expect("an enable edge");
+    assert!(bits[edge + 1..].iter().all(|b| *b));
+    assert_eq!(rig.last_heartbeat(), Some(ControllerHeartbeatState::Auto));
+    rig.assert_limits();
+}
+
+#[test]
+fn laser_silence_stops_the_car() {
+    let mut rig = Rig::new();
+    rig.drive();
+    rig.run(
+        1.0,
+        1.5,
+        Feed {
+            laser: false,
+            ..ALL
+        },
+    );
+    rig.assert_safe_stop(FaultReportCode::LaserSilent);
+    rig.assert_limits();
+}
+
+#[test]
+fn a_silent_ecu_report_stops_the_car() {
+    let mut rig = Rig::new();
+    rig.drive();
+    rig.run(
+        1.0,
+        1.5,
+        Feed {
+            reports: false,
+            ..ALL
+        },
+    );
+    rig.assert_safe_stop(FaultReportCode::ReportTimeout);
+}
+
+#[test]
+fn an_actuator_fault_stops_the_car() {
+    let mut rig = Rig::new();
+    rig.drive();
+    rig.run(
+        1.0,
+        1.2,
+        Feed {
+            steering_fault: true,
+            ..ALL
+        },
+    );
+    rig.assert_safe_stop(FaultReportCode::ActuatorFault);
+}
+
+#[test]
+fn gps_loss_stops_the_car_and_estop_is_latched() {
+    let mut rig = Rig::new();
+    rig.drive();
+    rig.run(1.0, 2.0, Feed { gps: false, ..ALL });
+    rig.assert_safe_stop(FaultReportCode::GpsLost);
+    // The fix comes back: the estop stays until the controller is restarted.
+    rig.run(2.0, 3.0, ALL);
+    assert!(matches!(rig.ctl.mode(), Mode::Estop { .. }));
+    rig.assert_limits();
+}
