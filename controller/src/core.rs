@@ -14,7 +14,9 @@ use golf_car_can::{
 use serde::Serialize;
 
 use crate::config::ControllerConfig;
-use crate::guidance::{Circle, FollowInputs, Guidance, GuidanceError, Navigator};
+use crate::guidance::{
+    Circle, FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
+};
 use crate::localisation::{Localiser, Pose};
 use crate::perception::{Perception, PerceptionError, Pose2, Scan};
 
@@ -81,6 +83,36 @@ pub struct Sample {
     pub speed_cmd: f64,
 }
 
+/// Replanning on a thread of its own, so the 10 ms command loop never waits for it.
+#[derive(Debug)]
+struct PlanWorker {
+    requests: std::sync::mpsc::Sender<PlanRequest>,
+    outcomes: std::sync::mpsc::Receiver<PlanOutcome>,
+    in_flight: bool,
+}
+
+impl PlanWorker {
+    fn spawn() -> std::io::Result<PlanWorker> {
+        let (requests, jobs) = std::sync::mpsc::channel::<PlanRequest>();
+        let (done, outcomes) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name("planner".to_owned())
+            .spawn(move || {
+                // Ends when the controller (the sender) is dropped.
+                while let Ok(req) = jobs.recv() {
+                    if done.send(solve(&req)).is_err() {
+                        break;
+                    }
+                }
+            })?;
+        Ok(PlanWorker {
+            requests,
+            outcomes,
+            in_flight: false,
+        })
+    }
+}
+
 /// The controller.
 #[derive(Debug)]
 pub struct Controller {
@@ -100,6 +132,8 @@ pub struct Controller {
     next_fault: f64,
     /// Scans perception refused.
     pub bad_scans: u64,
+    /// Replanning off the command loop (HIL); inline when None (SIL, deterministic).
+    worker: Option<PlanWorker>,
     /// The code sent in FAULT_REPORT while in estop.
     fault_code: FaultReportCode,
     pub samples: Vec<Sample>,
@@ -126,9 +160,43 @@ impl Controller {
             next_command: 0.0,
             next_fault: 0.0,
             bad_scans: 0,
+            worker: None,
             fault_code: FaultReportCode::Internal,
             samples: Vec::new(),
         })
+    }
+
+    /// Replan on a thread of its own from now on (the binary does; SIL keeps replanning
+    /// inline so runs stay deterministic).
+    pub fn with_planning_thread(mut self) -> std::io::Result<Controller> {
+        self.worker = Some(PlanWorker::spawn()?);
+        Ok(self)
+    }
+
+    /// Start a replanning when one is due and take the finished ones.
+    fn plan(&mut self, now: f64, pose: &Pose) {
+        match &mut self.worker {
+            None => {
+                if self.nav.replan_due(now, pose) {
+                    self.nav.issued(now);
+                    let outcome = solve(&self.nav.request(now, pose, &self.obstacles));
+                    self.nav.accept(outcome);
+                }
+            }
+            Some(w) => {
+                while let Ok(outcome) = w.outcomes.try_recv() {
+                    self.nav.accept(outcome);
+                    w.in_flight = false;
+                }
+                if !w.in_flight && self.nav.replan_due(now, pose) {
+                    self.nav.issued(now);
+                    w.in_flight = w
+                        .requests
+                        .send(self.nav.request(now, pose, &self.obstacles))
+                        .is_ok();
+                }
+            }
+        }
     }
 
     pub fn mode(&self) -> &Mode {
@@ -356,7 +424,10 @@ impl Controller {
                         (true, hold),
                         (true, 0.0, 50.0),
                     ),
-                    Some(pose) => match self.nav.update(now, &pose, &self.obstacles) {
+                    Some(pose) => match {
+                        self.plan(now, &pose);
+                        self.nav.follow(&pose)
+                    } {
                         Guidance::Drive {
                             steer,
                             speed,

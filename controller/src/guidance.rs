@@ -154,6 +154,8 @@ pub struct Navigator {
     active: Option<Trajectory>,
     next_replan: f64,
     infeasible_since: Option<f64>,
+    /// Why the last replanning was refused, if it was.
+    planner_error: Option<String>,
     pub plans: Vec<PlanRecord>,
 }
 
@@ -202,6 +204,7 @@ impl Navigator {
             active: None,
             next_replan: 0.0,
             infeasible_since: None,
+            planner_error: None,
             plans: Vec::new(),
         })
     }
@@ -213,13 +216,8 @@ impl Navigator {
             .map_or(0.0, |h| wrap(h.to_radians() - self.frame.angle))
     }
 
-    /// Plan from `pose` at `now`; Ok(None) when no feasible path exists.
-    fn replan(
-        &mut self,
-        now: f64,
-        pose: &Pose,
-        obstacles: &[Circle],
-    ) -> Result<Option<Trajectory>, String> {
+    /// The planning problem for a replanning from `pose` at `now`.
+    pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
         let (px, py) = self.frame.to_path(pose.x, pose.y);
         let theta = wrap(pose.theta - self.frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * self.cfg.planner.steer_usage).to_radians();
@@ -265,88 +263,63 @@ impl Navigator {
                 })
                 .collect(),
         };
-        let step =
-            planner::plan_with(&problem, &PlanOptions::default()).map_err(|e| e.to_string())?;
-        let mut chosen = step.trajectory.clone();
-        let mut a6 = step.result.a6_chosen;
-        // The method has no steering limit: among the feasible a6, take the cheapest
-        // whose path stays within it.
-        if step.result.max_abs_steering.is_some_and(|s| s > limit) {
-            chosen = None;
-            a6 = None;
-            let mut best: Option<(f64, f64, Trajectory)> = None;
-            for candidate in candidates(step.result.a6_unconstrained, &step.result.feasible_set) {
-                let Ok(t) = problem.trajectory(candidate) else {
-                    continue;
-                };
-                if max_steer(&t) > limit {
-                    continue;
-                }
-                let line = planner::ReferenceLine::new(0.0, 0.0, self.frame.length, 0.0)
-                    .map_err(|e| e.to_string())?;
-                let cost = t.path().reference_cost(&line);
-                if best.as_ref().is_none_or(|b| cost < b.0) {
-                    best = Some((cost, candidate, t));
-                }
-            }
-            if let Some((_, c, t)) = best {
-                a6 = Some(c);
-                chosen = Some(t);
-            }
-        }
-        self.plans.push(PlanRecord {
+        PlanRequest {
             time: now,
-            feasible: chosen.is_some(),
-            a6,
-            projected_to_boundary: step.result.projected_to_boundary,
-            max_steer_deg: chosen.as_ref().map(|t| max_steer(t).to_degrees()),
-            path: chosen.as_ref().map_or_else(Vec::new, |t| {
-                let p = t.path();
-                (0..=40)
-                    .map(|j| {
-                        let x = p.x_k() + p.span() * f64::from(j) / 40.0;
-                        let (wx, wy) = self.frame.to_world(x, p.y(x));
-                        [wx, wy]
-                    })
-                    .collect()
-            }),
-        });
-        Ok(chosen)
+            problem,
+            steer_limit: limit,
+            frame: self.frame,
+        }
     }
 
-    /// Guidance at `now` from the pose and the obstacles in view.
-    pub fn update(&mut self, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+    /// Whether a replanning is due at `now` from `pose`.
+    pub fn replan_due(&self, now: f64, pose: &Pose) -> bool {
+        let (px, _) = self.frame.to_path(pose.x, pose.y);
+        now >= self.next_replan && self.frame.length - px > self.cfg.planner.final_approach
+    }
+
+    /// A replanning was issued at `now`: the next is due one T_s later.
+    pub fn issued(&mut self, now: f64) {
+        self.next_replan = now + self.cfg.planner.replan_period_s;
+    }
+
+    /// Take a finished replanning: its path is followed from now on.
+    pub fn accept(&mut self, outcome: PlanOutcome) {
+        match outcome.result {
+            Ok((trajectory, record)) => {
+                if trajectory.is_some() {
+                    self.infeasible_since = None;
+                } else {
+                    self.infeasible_since.get_or_insert(outcome.time);
+                }
+                self.active = trajectory;
+                self.planner_error = None;
+                self.plans.push(record);
+            }
+            Err(e) => {
+                self.active = None;
+                self.planner_error = Some(e);
+            }
+        }
+    }
+
+    /// Follow the current path from `pose` (no planning).
+    pub fn follow(&mut self, pose: &Pose) -> Guidance {
         let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
         let to_goal = (pose.x - goal.0).hypot(pose.y - goal.1);
         if to_goal <= self.cfg.mission.goal_tolerance {
             return Guidance::Arrived;
         }
         let (px, py) = self.frame.to_path(pose.x, pose.y);
-        let remaining = self.frame.length - px;
-        if remaining <= 0.0 {
+        if self.frame.length - px <= 0.0 {
             // Past the goal's x without reaching it: the polynomial cannot go back.
             return Guidance::Stop {
                 reason: format!("passed the goal {to_goal:.2} m beside it"),
             };
         }
-        if now >= self.next_replan && remaining > self.cfg.planner.final_approach {
-            self.next_replan = now + self.cfg.planner.replan_period_s;
-            match self.replan(now, pose, obstacles) {
-                Ok(Some(t)) => {
-                    self.active = Some(t);
-                    self.infeasible_since = None;
-                }
-                Ok(None) => {
-                    self.active = None;
-                    self.infeasible_since.get_or_insert(now);
-                }
-                Err(e) => {
-                    self.active = None;
-                    return Guidance::Stop {
-                        reason: format!("planner: {e}"),
-                    };
-                }
-            }
+        if let Some(e) = &self.planner_error {
+            return Guidance::Stop {
+                reason: format!("planner: {e}"),
+            };
         }
         let Some(t) = &self.active else {
             return Guidance::Stop {
@@ -379,6 +352,86 @@ impl Navigator {
             speed,
             inputs,
         }
+    }
+}
+
+/// One replanning to do: the problem in the planning frame and the steering limit.
+#[derive(Clone, Debug)]
+pub struct PlanRequest {
+    pub time: f64,
+    pub problem: PlanProblem,
+    /// Road-wheel angle a planned path may use, radians.
+    pub steer_limit: f64,
+    frame: PathFrame,
+}
+
+/// A finished replanning: the path (None when no feasible path exists) and its
+/// record, or why the planner refused the problem.
+#[derive(Clone, Debug)]
+pub struct PlanOutcome {
+    pub time: f64,
+    pub result: Result<(Option<Trajectory>, PlanRecord), String>,
+}
+
+/// Solve a replanning (pure: runs inline or on a planning thread). Among the feasible
+/// a6 it takes the cheapest whose path stays within the steering limit, since the
+/// method itself has none.
+pub fn solve(req: &PlanRequest) -> PlanOutcome {
+    let run = || -> Result<(Option<Trajectory>, PlanRecord), String> {
+        let problem = &req.problem;
+        let step =
+            planner::plan_with(problem, &PlanOptions::default()).map_err(|e| e.to_string())?;
+        let mut chosen = step.trajectory.clone();
+        let mut a6 = step.result.a6_chosen;
+        if step
+            .result
+            .max_abs_steering
+            .is_some_and(|s| s > req.steer_limit)
+        {
+            chosen = None;
+            a6 = None;
+            let line = planner::ReferenceLine::new(0.0, 0.0, problem.goal.x, 0.0)
+                .map_err(|e| e.to_string())?;
+            let mut best: Option<(f64, f64, Trajectory)> = None;
+            for candidate in candidates(step.result.a6_unconstrained, &step.result.feasible_set) {
+                let Ok(t) = problem.trajectory(candidate) else {
+                    continue;
+                };
+                if max_steer(&t) > req.steer_limit {
+                    continue;
+                }
+                let cost = t.path().reference_cost(&line);
+                if best.as_ref().is_none_or(|b| cost < b.0) {
+                    best = Some((cost, candidate, t));
+                }
+            }
+            if let Some((_, c, t)) = best {
+                a6 = Some(c);
+                chosen = Some(t);
+            }
+        }
+        let record = PlanRecord {
+            time: req.time,
+            feasible: chosen.is_some(),
+            a6,
+            projected_to_boundary: step.result.projected_to_boundary,
+            max_steer_deg: chosen.as_ref().map(|t| max_steer(t).to_degrees()),
+            path: chosen.as_ref().map_or_else(Vec::new, |t| {
+                let p = t.path();
+                (0..=40)
+                    .map(|j| {
+                        let x = p.x_k() + p.span() * f64::from(j) / 40.0;
+                        let (wx, wy) = req.frame.to_world(x, p.y(x));
+                        [wx, wy]
+                    })
+                    .collect()
+            }),
+        };
+        Ok((chosen, record))
+    };
+    PlanOutcome {
+        time: req.time,
+        result: run(),
     }
 }
 
@@ -428,6 +481,13 @@ fn candidates(a6_star: f64, feasible: &[Interval]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn replan_and_follow(nav: &mut Navigator, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+        assert!(nav.replan_due(0.0, pose));
+        nav.issued(0.0);
+        nav.accept(solve(&nav.request(0.0, pose, obstacles)));
+        nav.follow(pose)
+    }
 
     #[test]
     fn path_frame_round_trips_and_points_at_the_goal() {
@@ -483,7 +543,7 @@ mod tests {
             vx: 0.0,
             vy: 0.0,
         };
-        match nav.update(0.0, &pose, &[post]) {
+        match replan_and_follow(&mut nav, &pose, &[post]) {
             Guidance::Drive { steer, speed, .. } => {
                 assert!(steer.abs() <= 35f64.to_radians() && speed > 0.0);
             }
@@ -526,7 +586,7 @@ mod tests {
             vy: 0.0,
         };
         assert!(matches!(
-            nav.update(0.0, &pose, &[blocker]),
+            replan_and_follow(&mut nav, &pose, &[blocker]),
             Guidance::Stop { .. }
         ));
     }

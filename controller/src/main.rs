@@ -194,7 +194,9 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     }
     cfg.validate()
         .map_err(|(field, message)| anyhow::anyhow!("{field}: {message}"))?;
-    let mut ctl = Controller::new(&cfg)?;
+    let mut ctl = Controller::new(&cfg)?
+        .with_planning_thread()
+        .context("starting the planning thread")?;
     let mut can = CanPort::open(&args.can)?;
     let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
     let mut gps = NmeaLink::new(port, ReaderConfig::default());
