@@ -42,6 +42,7 @@ APT_PKGS=(
     busybox-static      # virtme-ng builds the guest initramfs (module loading for 9p/virtio) with it
     can-utils           # candump / cansend / cangen for tests and debugging inside the VM
     iproute2            # `ip link add dev vcan0 type vcan` inside the VM
+    fonts-dejavu-core   # the font ugv-sim draws its figures with (plotters, ab_glyph)
     gpsd                # NMEA cross-check: sim/tests/gps_gpsd.rs runs gpsd -N -n -b on the simulated GPS pty
 )
 # From bookworm-backports: the machine image ships qemu-utils 10.0 from backports,

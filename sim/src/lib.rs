@@ -14,6 +14,7 @@ pub mod plot;
 pub mod run;
 pub mod scenario;
 pub mod sil;
+pub mod suite;
 pub mod vehicle;
 pub mod verdict;
 pub mod world;

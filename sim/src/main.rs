@@ -43,6 +43,22 @@ enum Command {
     /// Run a scenario: in real time on the real wires (HIL; the default), or with the
     /// controller library in lockstep (--sil).
     Run(RunArgs),
+    /// Run every scenario of a folder in SIL, in parallel, and write summary.md,
+    /// summary.json and junit.xml. Exit code 0 when all pass, 1 otherwise.
+    Suite {
+        /// The folder of scenario files (*.toml).
+        dir: PathBuf,
+        /// Where the summaries go.
+        #[arg(long, default_value = "results/suite")]
+        results: PathBuf,
+        /// Parallel runs; default: the number of cores.
+        #[arg(long)]
+        jobs: Option<usize>,
+        #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
+        follower: FollowerKind,
+        #[arg(long)]
+        anfis_model: Option<PathBuf>,
+    },
     /// Validate scenario files: parse, check every field, and report the first error
     /// of each with its file, line and field.
     Check {
@@ -156,6 +172,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             })
         }
         Command::Run(args) => run_scenario(args),
+        Command::Suite {
+            dir,
+            results,
+            jobs,
+            follower,
+            anfis_model,
+        } => run_suite(&dir, &results, jobs, follower, anfis_model),
     }
 }
 
@@ -314,4 +337,63 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     )?;
     println!("{}", serde_json::to_string_pretty(&verdict)?);
     Ok(ExitCode::from(exit_code(&outcome)))
+}
+
+fn run_suite(
+    dir: &std::path::Path,
+    results: &std::path::Path,
+    jobs: Option<usize>,
+    follower: FollowerKind,
+    anfis_model: Option<PathBuf>,
+) -> Result<ExitCode> {
+    use ugv_sim::suite;
+    let files = suite::scenario_files(dir).with_context(|| format!("reading {}", dir.display()))?;
+    anyhow::ensure!(
+        !files.is_empty(),
+        "no scenario files (*.toml) in {}",
+        dir.display()
+    );
+    let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let total = files.len();
+    let tune = move |sc: &Scenario| {
+        let mut cfg = controller_config(sc, follower);
+        cfg.follower.anfis_model = anfis_model.clone();
+        cfg
+    };
+    let started = std::time::Instant::now();
+    let entries = suite::run_suite(&files, jobs, &tune, &|done, e| {
+        let width = 30;
+        let filled = done * width / total;
+        eprintln!(
+            "[{}{}] {done}/{total} {}: {}",
+            "#".repeat(filled),
+            ".".repeat(width - filled),
+            e.name,
+            if e.passed() { "passed" } else { "FAILED" }
+        );
+    });
+    let wall = started.elapsed().as_secs_f64();
+    let simulated: f64 = entries
+        .iter()
+        .filter_map(|e| e.verdict.as_ref().map(|v| v.time))
+        .sum();
+    std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
+    let md = suite::markdown(&entries);
+    std::fs::write(results.join("summary.md"), &md)?;
+    std::fs::write(
+        results.join("summary.json"),
+        serde_json::to_string_pretty(&entries)?,
+    )?;
+    std::fs::write(results.join("junit.xml"), suite::junit(&entries))?;
+    print!("{md}");
+    eprintln!(
+        "ugv-sim: {simulated:.1} s simulated in {wall:.2} s ({:.0}x real time); summaries in {}",
+        simulated / wall.max(1e-9),
+        results.display()
+    );
+    Ok(if entries.iter().all(|e| e.passed()) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }

@@ -141,3 +141,43 @@ fn an_anfis_follower_trained_on_a_recorded_run_drives_the_paper_scenario() {
     let c = v.controller.expect("controller summary");
     assert!(c.tracking_error_rms < 0.3, "{}", c.tracking_error_rms);
 }
+
+#[test]
+fn the_scenario_suite_passes_in_sil_and_summarises_for_ci() {
+    use ugv_sim::suite;
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite");
+    let files = suite::scenario_files(&dir).expect("suite folder");
+    assert!(files.len() >= 8, "{files:?}");
+    let seen = std::sync::atomic::AtomicUsize::new(0);
+    let entries = suite::run_suite(
+        &files,
+        2,
+        &suite::default_tune(FollowerKind::Optimal),
+        &|_, _| {
+            seen.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        },
+    );
+    assert_eq!(entries.len(), files.len());
+    assert_eq!(
+        seen.into_inner(),
+        files.len(),
+        "progress saw every scenario"
+    );
+    for e in &entries {
+        assert!(
+            e.passed(),
+            "{}: {:?} {:?}",
+            e.name,
+            e.error,
+            e.verdict.as_ref().map(|v| &v.failures)
+        );
+    }
+    let md = suite::markdown(&entries);
+    assert!(
+        md.contains(&format!("{} of {} passed", files.len(), files.len())),
+        "{md}"
+    );
+    let xml = suite::junit(&entries);
+    assert_eq!(xml.matches("<testcase ").count(), files.len());
+    assert!(!xml.contains("<failure"));
+}
