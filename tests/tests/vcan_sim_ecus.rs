@@ -110,6 +110,10 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
                 "--status-every",
                 "5",
             ])
+            .arg("--results")
+            .arg(dir.path().join("results"))
+            .arg("--gps-link")
+            .arg(dir.path().join("gps"))
             .stdout(Stdio::null())
             .spawn()
             .context("ugv-sim")?,
