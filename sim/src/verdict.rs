@@ -20,6 +20,8 @@ pub struct ControllerSummary {
     /// The controller's final mode (as it reported it).
     pub mode: serde_json::Value,
     pub tracking_error_rms: f64,
+    /// RMS of the commanded steering rate, deg/s (the steering effort).
+    pub steering_effort_deg_s: f64,
     pub replans: usize,
     pub infeasible_replans: usize,
 }
@@ -38,6 +40,21 @@ pub struct Verdict {
     #[serde(flatten)]
     pub report: RunReport,
     pub controller: Option<ControllerSummary>,
+}
+
+/// RMS of the commanded steering rate over the control samples, deg/s.
+fn steering_effort(t: &Trace) -> f64 {
+    let rates: Vec<f64> = t
+        .samples
+        .windows(2)
+        .filter(|w| w[1].t > w[0].t)
+        .map(|w| (w[1].steer_cmd - w[0].steer_cmd).to_degrees() / (w[1].t - w[0].t))
+        .collect();
+    if rates.is_empty() {
+        0.0
+    } else {
+        (rates.iter().map(|r| r * r).sum::<f64>() / rates.len() as f64).sqrt()
+    }
 }
 
 fn outcome_time(o: &Outcome) -> f64 {
@@ -91,6 +108,7 @@ impl Verdict {
         let controller = trace.map(|t| ControllerSummary {
             mode: serde_json::to_value(&t.mode).unwrap_or_default(),
             tracking_error_rms: t.tracking_error_rms,
+            steering_effort_deg_s: steering_effort(t),
             replans: t.plans.len(),
             infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
         });
@@ -129,8 +147,8 @@ fn write(path: &Path, text: &str) -> Result<(), ResultsError> {
     })
 }
 
-/// Write `verdict.json`, `trace.json` (when there is one), `figure.svg` and
-/// `figure.png` into `dir`.
+/// Write `verdict.json`, `trace.json` and `training.csv` (when there is a trace),
+/// `figure.svg` and `figure.png` into `dir`.
 pub fn write_results(
     dir: &Path,
     scenario: &Scenario,
@@ -149,6 +167,8 @@ pub fn write_results(
     )?;
     if let Some(t) = trace {
         write(&dir.join("trace.json"), &serde_json::to_string(t)?)?;
+        // The follower's inputs and commands, for `ugv-controller anfis train`.
+        write(&dir.join("training.csv"), &t.training_csv())?;
     }
     let plans: Vec<PlannedPath> = trace
         .map(|t| {
