@@ -220,8 +220,8 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         let verdict = Verdict::judge("sil", &sc, report, Some(&run.trace));
         eprintln!(
             "ugv-sim: SIL {:.1} s simulated in {wall:.2} s ({:.0}x real time)",
-            verdict.time,
-            verdict.time / wall.max(1e-9)
+            verdict.time(),
+            verdict.time() / wall.max(1e-9)
         );
         write_results(
             &args.results,
@@ -375,7 +375,7 @@ fn run_suite(
     let wall = started.elapsed().as_secs_f64();
     let simulated: f64 = entries
         .iter()
-        .filter_map(|e| e.verdict.as_ref().map(|v| v.time))
+        .filter_map(|e| e.verdict.as_ref().map(|v| v.time()))
         .sum();
     std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
     let md = suite::markdown(&entries);

@@ -281,18 +281,16 @@ impl<B: Can> Sim<B> {
             self.trajectory.push((now, self.vehicle));
         }
 
+        // One distance query per obstacle gives both the clearance bookkeeping and the
+        // collision verdict (a distance of zero is a touch or an overlap).
         let clear = self.world.clearances(&self.scenario.vehicle, &self.vehicle);
         for (m, c) in self.min_clearance.iter_mut().zip(&clear) {
             *m = m.min(*c);
         }
-        if let Some(i) = self
-            .world
-            .footprint_hits(&self.scenario.vehicle, &self.vehicle)
-            .first()
-        {
+        if let Some(i) = clear.iter().position(|c| *c <= 0.0) {
             return Ok(Some(Outcome::Collision {
                 time: now,
-                obstacle: *i,
+                obstacle: i,
             }));
         }
         if self.scenario.success.reach_goal

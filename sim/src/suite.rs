@@ -133,7 +133,7 @@ pub fn markdown(entries: &[SuiteEntry]) -> String {
     for e in entries {
         let (t, path, clear, steer, rms) = match &e.verdict {
             Some(v) => (
-                format!("{:.1}", v.time),
+                format!("{:.1}", v.time()),
                 format!("{:.1}", v.report.path_length),
                 v.report
                     .min_clearance

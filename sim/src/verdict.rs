@@ -36,7 +36,7 @@ pub struct Verdict {
     pub failures: Vec<String>,
     pub goal_reached: bool,
     pub collision: bool,
-    pub time: f64,
+    /// The outcome (with its time) and the rest of the simulator's report.
     #[serde(flatten)]
     pub report: RunReport,
     pub controller: Option<ControllerSummary>,
@@ -57,16 +57,17 @@ fn steering_effort(t: &Trace) -> f64 {
     }
 }
 
-fn outcome_time(o: &Outcome) -> f64 {
-    match o {
-        Outcome::GoalReached { time }
-        | Outcome::Collision { time, .. }
-        | Outcome::TimeLimit { time }
-        | Outcome::Stopped { time, .. } => *time,
-    }
-}
-
 impl Verdict {
+    /// When the run ended, simulated seconds.
+    pub fn time(&self) -> f64 {
+        match &self.report.outcome {
+            Outcome::GoalReached { time }
+            | Outcome::Collision { time, .. }
+            | Outcome::TimeLimit { time }
+            | Outcome::Stopped { time, .. } => *time,
+        }
+    }
+
     pub fn judge(
         mode: &str,
         scenario: &Scenario,
@@ -118,7 +119,6 @@ impl Verdict {
             failures,
             goal_reached,
             collision,
-            time: outcome_time(&report.outcome),
             report,
             controller,
         }

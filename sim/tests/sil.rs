@@ -181,3 +181,29 @@ fn the_scenario_suite_passes_in_sil_and_summarises_for_ci() {
     assert_eq!(xml.matches("<testcase ").count(), files.len());
     assert!(!xml.contains("<failure"));
 }
+
+/// Pins a known limitation (issue 6) and the collision verdict: an obstacle crossing
+/// from the right at 1.3 m/s, timed to meet the car, is hit, because the planner
+/// swerves the car ahead of it in its direction of travel. When the planner learns to
+/// yield, this test must be turned into a pass.
+#[test]
+fn a_crossing_obstacle_timed_to_meet_the_car_ends_in_a_collision_verdict() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite");
+    let mut sc = Scenario::load(&dir.join("05-crossing.toml")).expect("scenario");
+    for o in &mut sc.obstacles {
+        if let Obstacle::Circle {
+            motion: Some(ugv_sim::scenario::Motion::Velocity { vy, .. }),
+            ..
+        } = o
+        {
+            *vy = 1.3;
+        }
+    }
+    let (v, _) = verdict(&sc);
+    assert!(v.collision && !v.passed, "{:?}", v.failures);
+    assert!(matches!(
+        v.report.outcome,
+        Outcome::Collision { obstacle: 0, .. }
+    ));
+    assert_eq!(v.report.min_clearance[0], 0.0);
+}
