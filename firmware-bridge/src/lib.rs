@@ -5,10 +5,13 @@
 //! - [`can`]: a SocketCAN endpoint that speaks golf_car.dbc with E2E protection.
 //! - [`nmea`]: the GPS wire, NMEA 0183 writer and reader, serial and pty endpoints.
 //! - [`laser`]: the laser scan frame and its iceoryx2 publisher/subscriber.
+//! - [`cola`]: the physical SICK laser over Ethernet (CoLa-A): scan telegrams, a
+//!   scanner emulation serving laser frames, and the driver behind `ugv-sick`.
 //! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
 
 pub mod can;
 pub mod clock;
+pub mod cola;
 pub mod geodesy;
 pub mod laser;
 pub mod nmea;

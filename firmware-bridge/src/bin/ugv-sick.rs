@@ -1,0 +1,275 @@
+//! `ugv-sick`: drive a SICK laser scanner (LMS1xx, LMS5xx, TiM) over Ethernet (CoLa-A)
+//! and publish its scans on the laser's iceoryx2 service, exactly as the simulator
+//! publishes its simulated scans, so the controller cannot tell the difference.
+//!
+//! ```text
+//! ugv-sick --address 192.168.0.1:2111 --service ugv-hil/<run_id>/laser
+//! ugv-sick --address 127.0.0.1:2111 --service ugv-hil/bench/laser --range-max 80 --host-stamps
+//! ```
+//!
+//! It logs in as authorized client, reads the device identity, asks for streamed
+//! scans (`sEN LMDscandata 1`) and publishes each as a `LaserFrame` (conventions in
+//! `firmware_bridge::cola`). Every `--report-interval` seconds it logs scans/s, lost
+//! scans and bad telegrams. When the connection drops it reconnects once per second
+//! (or exits with status 1 with `--no-reconnect`). Ctrl-C or SIGTERM end it with
+//! status 0. Errors name the scanner's address or the service.
+
+use std::process::ExitCode;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, TryRecvError, channel};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use firmware_bridge::cola::{ClientConfig, ColaClient, ColaError, DecodeOptions};
+use firmware_bridge::laser::LaserPublisher;
+
+/// Publish a SICK scanner's scans (CoLa-A over TCP) on an iceoryx2 laser service.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Args {
+    /// The scanner, `host:port` (SICK's CoLa-A port is 2111).
+    #[arg(long, value_name = "HOST:PORT")]
+    address: String,
+    /// The iceoryx2 laser service, `ugv-hil/<run_id>/laser`.
+    #[arg(long)]
+    service: String,
+    /// The frames' range_min, metres (the scanner does not send it).
+    #[arg(long, value_name = "M", default_value_t = 0.5)]
+    range_min: f32,
+    /// The frames' range_max, metres (LMS111: 20, LMS511: 80).
+    #[arg(long, value_name = "M", default_value_t = 20.0)]
+    range_max: f32,
+    /// Do not log in as authorized client first.
+    #[arg(long)]
+    no_login: bool,
+    /// Send LMCstartmeas and Run before streaming (a scanner left stopped).
+    #[arg(long)]
+    start_measurement: bool,
+    /// Stamp scans with this host's clock even when the scanner sends a time stamp.
+    #[arg(long)]
+    host_stamps: bool,
+    /// Seconds allowed for connecting and for each answer.
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
+    connect_timeout: f64,
+    /// Warn when no scan arrives for this many seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
+    frame_timeout: f64,
+    /// Seconds between the scans/s log lines.
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
+    report_interval: f64,
+    /// Exit with status 1 when the connection fails or drops, instead of retrying.
+    #[arg(long)]
+    no_reconnect: bool,
+    /// Exit after publishing this many scans.
+    #[arg(long, value_name = "N")]
+    count: Option<u64>,
+}
+
+fn seconds(name: &str, value: f64) -> anyhow::Result<Duration> {
+    if !(value.is_finite() && value > 0.0) {
+        bail!("--{name} {value}: must be a positive number of seconds");
+    }
+    Ok(Duration::from_secs_f64(value))
+}
+
+/// Counters between two report lines and in total.
+#[derive(Debug, Default)]
+struct Tally {
+    published: u64,
+    publish_errors: u64,
+    bad: u64,
+}
+
+/// What ended a wait: Ctrl-C, or the time passed.
+fn stopped(stop: &Receiver<()>, wait: Duration) -> bool {
+    match stop.recv_timeout(wait) {
+        Ok(()) | Err(RecvTimeoutError::Disconnected) => true,
+        Err(RecvTimeoutError::Timeout) => false,
+    }
+}
+
+/// Run `attempt` (a connect or reconnect) until it succeeds, once per second, unless
+/// `--no-reconnect`. `Ok(false)`: Ctrl-C while trying.
+fn retry(
+    args: &Args,
+    stop: &Receiver<()>,
+    mut attempt: impl FnMut() -> Result<(), ColaError>,
+) -> anyhow::Result<bool> {
+    loop {
+        match attempt() {
+            Ok(()) => return Ok(true),
+            Err(e) if args.no_reconnect => {
+                return Err(e).with_context(|| format!("scanner at {}", args.address));
+            }
+            Err(e) => tracing::warn!("scanner at {}: {e}; retrying in 1 s", args.address),
+        }
+        if stopped(stop, Duration::from_secs(1)) {
+            return Ok(false);
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<()> {
+    if !(args.range_min.is_finite()
+        && args.range_max.is_finite()
+        && args.range_min >= 0.0
+        && args.range_min < args.range_max)
+    {
+        bail!(
+            "--range-min {} --range-max {}: need 0 <= range-min < range-max, in metres",
+            args.range_min,
+            args.range_max
+        );
+    }
+    let timeout = seconds("connect-timeout", args.connect_timeout)?;
+    let frame_timeout = seconds("frame-timeout", args.frame_timeout)?;
+    let report_interval = seconds("report-interval", args.report_interval)?;
+    let config = ClientConfig {
+        connect_timeout: timeout,
+        reply_timeout: timeout,
+        login: !args.no_login,
+        start_measurement: args.start_measurement,
+        decode: DecodeOptions {
+            range_min: args.range_min,
+            range_max: args.range_max,
+            ..DecodeOptions::default()
+        },
+        host_stamps: args.host_stamps,
+        ..ClientConfig::default()
+    };
+
+    let (stop_tx, stop) = channel();
+    ctrlc::set_handler(move || {
+        let _ = stop_tx.send(());
+    })
+    .context("installing the Ctrl-C handler")?;
+
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let publisher = LaserPublisher::new(&args.service)
+        .with_context(|| format!("opening the laser service {}", args.service))?;
+
+    let mut connected = None;
+    let attempt =
+        || ColaClient::connect(&args.address, config.clone()).map(|c| connected = Some(c));
+    if !retry(args, &stop, attempt)? {
+        return Ok(());
+    }
+    let Some(mut client) = connected else {
+        bail!("scanner at {}: not connected", args.address);
+    };
+    tracing::info!(
+        address = %args.address,
+        device = %client.device_ident().name,
+        version = %client.device_ident().version,
+        service = %args.service,
+        "publishing scans"
+    );
+
+    let mut total = Tally::default();
+    let mut window = Tally::default();
+    let mut window_start = Instant::now();
+    let mut last_frame = Instant::now();
+    let mut silent_warned = false;
+    let slice = Duration::from_millis(250).min(frame_timeout);
+    loop {
+        match stop.try_recv() {
+            Ok(()) | Err(TryRecvError::Disconnected) => break,
+            Err(TryRecvError::Empty) => {}
+        }
+        match client.next_frame(slice) {
+            Ok(Some(frame)) => {
+                last_frame = Instant::now();
+                silent_warned = false;
+                match publisher.publish(&frame) {
+                    Ok(_) => {
+                        total.published += 1;
+                        window.published += 1;
+                    }
+                    Err(e) => {
+                        total.publish_errors += 1;
+                        window.publish_errors += 1;
+                        tracing::warn!(
+                            "scan {} not published on {}: {e}",
+                            frame.sequence,
+                            args.service
+                        );
+                    }
+                }
+                if args.count.is_some_and(|n| total.published >= n) {
+                    break;
+                }
+            }
+            Ok(None) => {
+                if !silent_warned && last_frame.elapsed() >= frame_timeout {
+                    silent_warned = true;
+                    tracing::warn!(
+                        "no scan from {} for {:.1} s",
+                        args.address,
+                        last_frame.elapsed().as_secs_f64()
+                    );
+                }
+            }
+            Err(e @ (ColaError::ConnectionLost { .. } | ColaError::Io { .. })) => {
+                if args.no_reconnect {
+                    return Err(e).with_context(|| format!("scanner at {}", args.address));
+                }
+                tracing::warn!("{e}; reconnecting");
+                if !retry(args, &stop, || client.reconnect())? {
+                    break;
+                }
+                last_frame = Instant::now();
+            }
+            Err(e) => {
+                // One bad telegram: say why, go on with the next.
+                total.bad += 1;
+                window.bad += 1;
+                if total.bad <= 10 || total.bad.is_power_of_two() {
+                    tracing::warn!(
+                        "scanner at {}: bad scan ({} so far): {e}",
+                        args.address,
+                        total.bad
+                    );
+                }
+            }
+        }
+        let elapsed = window_start.elapsed();
+        if elapsed >= report_interval {
+            let stats = client.stats();
+            tracing::info!(
+                "{:.1} scans/s, {} published, {} lost by the scanner or network, {} bad telegrams, {} publish errors",
+                window.published as f64 / elapsed.as_secs_f64(),
+                total.published,
+                stats.lost_scans,
+                total.bad,
+                total.publish_errors,
+            );
+            window = Tally::default();
+            window_start = Instant::now();
+        }
+    }
+    tracing::info!(
+        published = total.published,
+        lost = client.stats().lost_scans,
+        bad = total.bad,
+        "stopped"
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("ugv-sick: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
