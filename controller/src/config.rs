@@ -109,6 +109,28 @@ pub struct PlannerConfig {
     pub steer_usage: f64,
     /// Closer than this to the goal (along the line), no replanning, metres.
     pub final_approach: f64,
+    /// Paces tried when a moving obstacle is in view, as fractions of the cruise speed,
+    /// fastest first: t_f - t_k = (x_f - x_k) / (fraction * cruise_speed) becomes a
+    /// second free parameter of the plan, so the car can yield by slowing down. The
+    /// fastest pace with a feasible path is taken; with none, the car stops.
+    pub pace_fractions: Vec<f64>,
+    /// Moving obstacles are planned as swept over +- this long along their velocity
+    /// (their estimated timing, and the car's, may be off by that much), seconds.
+    pub moving_time_margin_s: f64,
+    /// Added to the radius of moving obstacles on top of `safety_margin`, metres.
+    pub moving_margin: f64,
+    /// Among the feasible paces the one with the least mean squared deviation from the
+    /// start-goal line (m^2) plus this weight times the time per metre lost against the
+    /// fastest pace (s/m) is taken, m^3/s.
+    pub pace_time_weight: f64,
+    /// When the car heads more than this away from the start-goal line (a y(x) path
+    /// cannot start steeper than 90 degrees, nor well within the steering limit beyond
+    /// about this), it first turns towards the goal on full planned lock, degrees.
+    pub align_enter_deg: f64,
+    /// The turn ends (and planning resumes) once within this of the line, degrees.
+    pub align_exit_deg: f64,
+    /// Speed of that turn, m/s.
+    pub align_speed: f64,
 }
 
 impl Default for PlannerConfig {
@@ -119,6 +141,13 @@ impl Default for PlannerConfig {
             cruise_speed: 2.0,
             steer_usage: 0.85,
             final_approach: 1.5,
+            pace_fractions: vec![1.0, 0.8, 0.6, 0.45, 0.3, 0.2],
+            moving_time_margin_s: 1.0,
+            moving_margin: 0.2,
+            pace_time_weight: 2.0,
+            align_enter_deg: 65.0,
+            align_exit_deg: 30.0,
+            align_speed: 1.0,
         }
     }
 }
@@ -292,6 +321,41 @@ impl ControllerConfig {
             return Err((
                 "planner.steer_usage".to_owned(),
                 "must not exceed 1".to_owned(),
+            ));
+        }
+        if self.planner.pace_fractions.is_empty()
+            || self
+                .planner
+                .pace_fractions
+                .iter()
+                .any(|f| !(f.is_finite() && *f > 0.0 && *f <= 1.0))
+        {
+            return Err((
+                "planner.pace_fractions".to_owned(),
+                "must be one or more fractions in (0, 1]".to_owned(),
+            ));
+        }
+        for (name, v) in [
+            (
+                "planner.moving_time_margin_s",
+                self.planner.moving_time_margin_s,
+            ),
+            ("planner.moving_margin", self.planner.moving_margin),
+            ("planner.pace_time_weight", self.planner.pace_time_weight),
+            ("planner.align_speed", self.planner.align_speed),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((name.to_owned(), format!("must not be negative, is {v}")));
+            }
+        }
+        let pc = &self.planner;
+        if !(pc.align_exit_deg > 0.0
+            && pc.align_exit_deg < pc.align_enter_deg
+            && pc.align_enter_deg < 90.0)
+        {
+            return Err((
+                "planner.align_enter_deg".to_owned(),
+                "need 0 < align_exit_deg < align_enter_deg < 90".to_owned(),
             ));
         }
         if self.planner.cruise_speed > self.vehicle.max_speed {

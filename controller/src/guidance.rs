@@ -127,6 +127,16 @@ pub struct PlanRecord {
     pub max_steer_deg: Option<f64>,
     /// The planned path in the world frame.
     pub path: Vec<[f64; 2]>,
+    /// The pace planned, dx/dt along the start-goal line, m/s (None when infeasible).
+    #[serde(default)]
+    pub pace: Option<f64>,
+    /// Whether moving obstacles were planned in space-time (the pace was searched).
+    #[serde(default)]
+    pub moving: bool,
+    /// Set when the car heads too far from the line to plan: turn on this road-wheel
+    /// angle (radians) towards the goal first.
+    #[serde(default)]
+    pub align: Option<f64>,
 }
 
 /// What guidance asks of the actuators.
@@ -152,6 +162,10 @@ pub struct Navigator {
     pub frame: PathFrame,
     law: SteeringLaw,
     active: Option<Trajectory>,
+    /// The active path was planned around moving obstacles: drive its pace.
+    paced: bool,
+    /// Turning towards the goal on this road-wheel angle before planning, radians.
+    aligning: Option<f64>,
     next_replan: f64,
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
@@ -202,6 +216,8 @@ impl Navigator {
             frame: PathFrame::new((m.start_x, m.start_y), (m.goal_x, m.goal_y)),
             law,
             active: None,
+            paced: false,
+            aligning: None,
             next_replan: 0.0,
             infeasible_since: None,
             planner_error: None,
@@ -220,9 +236,11 @@ impl Navigator {
     pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
         let (px, py) = self.frame.to_path(pose.x, pose.y);
         let theta = wrap(pose.theta - self.frame.angle);
-        let limit = (self.cfg.vehicle.max_steer_deg * self.cfg.planner.steer_usage).to_radians();
+        let pc = &self.cfg.planner;
+        let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let span = self.frame.length - px;
-        let r0 = self.cfg.vehicle.radius + self.cfg.planner.safety_margin;
+        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
+        let mut any_moving = false;
         let problem = PlanProblem {
             state: planner::VehicleState {
                 x: px,
@@ -239,7 +257,7 @@ impl Navigator {
             line_start: planner::LineStart { x0: 0.0, y0: 0.0 },
             line_end: None,
             t_k: now,
-            t_f: now + span / self.cfg.planner.cruise_speed,
+            t_f: now + span / pc.cruise_speed,
             wheelbase: self.cfg.vehicle.wheelbase,
             vehicle_radius: r0,
             obstacles: obstacles
@@ -247,27 +265,65 @@ impl Navigator {
                 .map(|o| {
                     let (x, y) = self.frame.to_path(o.x, o.y);
                     let (vx, vy) = self.frame.rotate_to_path(o.vx, o.vy);
+                    if vx != 0.0 || vy != 0.0 {
+                        // Moving: swept and clipped per pace in `solve`.
+                        any_moving = true;
+                        return planner::Obstacle {
+                            x,
+                            y,
+                            radius: o.radius + pc.moving_margin,
+                            vx,
+                            vy,
+                        };
+                    }
                     // A path on the boundary of an inflated obstacle leaves the car on
                     // it; tracking errors then put the start inside, and every a6
                     // would be forbidden. Where the car already is within the margin,
                     // the obstacle is planned as just clear of where the car is, so
                     // the new path leads away from it, never closer.
-                    let gap = (px - x).hypot(py - y) - r0 - MARGIN_SLACK;
                     planner::Obstacle {
                         x,
                         y,
-                        radius: o.radius.min(gap.max(0.0)),
+                        radius: clip_to_start(o.radius, x, y, px, py, r0),
                         vx,
                         vy,
                     }
                 })
                 .collect(),
         };
+        let pacing = any_moving.then(|| Pacing {
+            speeds: pc
+                .pace_fractions
+                .iter()
+                .map(|f| f * pc.cruise_speed)
+                .collect(),
+            speed_now: pose.v.max(0.0),
+            accel: self.cfg.follower.accel_limit,
+            decel: self.cfg.follower.decel,
+            time_margin: pc.moving_time_margin_s,
+            time_weight: pc.pace_time_weight,
+        });
+        let threshold = if self.aligning.is_some() {
+            pc.align_exit_deg
+        } else {
+            pc.align_enter_deg
+        };
+        let align = (theta.abs() > threshold.to_radians()).then(|| Align {
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+            // Turn the short way round first.
+            prefer_left: theta < 0.0,
+            turn_radius: self.cfg.vehicle.wheelbase / limit.tan(),
+            obstacles: obstacles.to_vec(),
+        });
         PlanRequest {
             time: now,
             problem,
             steer_limit: limit,
             frame: self.frame,
+            pacing,
+            align,
         }
     }
 
@@ -292,11 +348,14 @@ impl Navigator {
                     self.infeasible_since.get_or_insert(outcome.time);
                 }
                 self.active = trajectory;
+                self.paced = record.moving;
+                self.aligning = record.align;
                 self.planner_error = None;
                 self.plans.push(record);
             }
             Err(e) => {
                 self.active = None;
+                self.aligning = None;
                 self.planner_error = Some(e);
             }
         }
@@ -321,6 +380,19 @@ impl Navigator {
                 reason: format!("planner: {e}"),
             };
         }
+        if let Some(steer) = self.aligning {
+            let theta = wrap(pose.theta - self.frame.angle);
+            return Guidance::Drive {
+                steer,
+                speed: self.cfg.planner.align_speed.min(self.cfg.vehicle.max_speed),
+                inputs: FollowInputs {
+                    e_y: 0.0,
+                    e_theta: theta,
+                    phi_ref: steer,
+                    v: pose.v,
+                },
+            };
+        }
         let Some(t) = &self.active else {
             return Guidance::Stop {
                 reason: "no collision-free path".to_owned(),
@@ -337,13 +409,17 @@ impl Navigator {
             v: pose.v,
         };
         let steer = self.law.steer(&inputs);
-        // Speed: the plan's pace, slower in curves and towards the goal.
+        // Speed: the plan's pace, slower in curves and towards the goal. Around moving
+        // obstacles the plan's timing matters: x must advance at the planned w1, so the
+        // speed along the path is w1 sqrt(1 + y'^2).
         let f = &self.cfg.follower;
         let curvature = path.curvature(x).abs().max(1e-6);
-        let speed = self
-            .cfg
-            .planner
-            .cruise_speed
+        let pace = if self.paced {
+            t.w1() * path.dy_dx(x).hypot(1.0)
+        } else {
+            self.cfg.planner.cruise_speed
+        };
+        let speed = pace
             .min((f.max_lateral_accel / curvature).sqrt())
             .min((2.0 * f.decel * to_goal).sqrt())
             .min(self.cfg.vehicle.max_speed);
@@ -363,6 +439,132 @@ pub struct PlanRequest {
     /// Road-wheel angle a planned path may use, radians.
     pub steer_limit: f64,
     frame: PathFrame,
+    /// Set when moving obstacles are in view: the paces to try.
+    pub pacing: Option<Pacing>,
+    /// Set when the car heads too far from the line: turn towards the goal first.
+    pub align: Option<Align>,
+}
+
+/// A car's nearest thing to turning on the spot: full planned lock at low speed, until
+/// the heading is within reach of a y(x) path. Taken only when the whole turning
+/// circle (grown by the planner's vehicle radius) is clear of every obstacle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Align {
+    /// The rear axle's pose, world frame.
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    /// Turning left is the short way round.
+    pub prefer_left: bool,
+    /// Turning radius of the rear axle at the planned steering limit, metres.
+    pub turn_radius: f64,
+    /// Obstacles in the world frame.
+    pub obstacles: Vec<Circle>,
+}
+
+impl Align {
+    /// Whether the full turning circle to the left (or right) is clear: every obstacle
+    /// is farther than its radius plus `r0` from the circle the rear axle drives.
+    pub fn clear(&self, left: bool, r0: f64) -> bool {
+        let s = if left { 1.0 } else { -1.0 };
+        let r = self.turn_radius;
+        let (cx, cy) = (
+            self.x - s * r * self.theta.sin(),
+            self.y + s * r * self.theta.cos(),
+        );
+        self.obstacles
+            .iter()
+            .all(|o| ((o.x - cx).hypot(o.y - cy) - r).abs() > o.radius + r0)
+    }
+
+    /// The road-wheel angle to turn with (the short way if clear, else the long way),
+    /// or None when neither turning circle is clear.
+    pub fn steer(&self, r0: f64, steer_limit: f64) -> Option<f64> {
+        [self.prefer_left, !self.prefer_left]
+            .into_iter()
+            .find(|left| self.clear(*left, r0))
+            .map(|left| if left { steer_limit } else { -steer_limit })
+    }
+}
+
+/// The second free parameter around moving obstacles: the pace (t_f), and how moving
+/// obstacles are swept for it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pacing {
+    /// dx/dt to try, m/s, fastest first.
+    pub speeds: Vec<f64>,
+    /// The car's speed now, m/s.
+    pub speed_now: f64,
+    /// Acceleration and deceleration the car changes pace with, m/s^2.
+    pub accel: f64,
+    pub decel: f64,
+    /// Moving obstacles are swept over +- this long along their velocity, seconds.
+    pub time_margin: f64,
+    /// Weight of the time lost by a slower pace against the path's deviation, m^3/s.
+    pub time_weight: f64,
+}
+
+impl Pacing {
+    /// The score of a feasible path at `pace` (lower is better): its mean squared
+    /// deviation from the start-goal line (J / span, m^2) plus `time_weight` times the
+    /// time per metre lost against the fastest pace. Yielding by slowing down beats a
+    /// wide swerve at full pace.
+    pub fn score(&self, mean_sq_deviation: f64, pace: f64, fastest: f64) -> f64 {
+        mean_sq_deviation + self.time_weight * (1.0 / pace - 1.0 / fastest)
+    }
+
+    /// How far off the planned schedule the car ends up while changing from its
+    /// current speed to `pace` (the plan assumes the pace from t_k on), as time at
+    /// that pace, seconds.
+    pub fn schedule_slip(&self, pace: f64) -> f64 {
+        let dv = pace - self.speed_now;
+        let a = if dv > 0.0 { self.accel } else { self.decel };
+        if pace <= 0.0 || a <= 0.0 {
+            return 0.0;
+        }
+        dv * dv / (2.0 * a * pace)
+    }
+}
+
+/// The radius to plan a static obstacle with: its own, or less where the car at
+/// (px, py) is already within the inflated radius r0 (plus a slack).
+fn clip_to_start(radius: f64, x: f64, y: f64, px: f64, py: f64, r0: f64) -> f64 {
+    let gap = (px - x).hypot(py - y) - r0 - MARGIN_SLACK;
+    radius.min(gap.max(0.0))
+}
+
+/// A moving obstacle swept over [-margin, +margin] seconds along its velocity: a chain
+/// of circles (each moving with it) spaced at most half the inflated radius (r + r0)
+/// apart, so the inflated chain covers the inflated capsule to within 3 % of r + r0.
+/// Circles the car at (px, py) already overlaps are shrunk as for static obstacles.
+pub fn sweep(
+    o: &planner::Obstacle,
+    margin: f64,
+    px: f64,
+    py: f64,
+    r0: f64,
+) -> Vec<planner::Obstacle> {
+    let speed = o.vx.hypot(o.vy);
+    let reach = speed * margin;
+    let spacing = (0.5 * (o.radius + r0)).max(0.05);
+    let n = ((2.0 * reach / spacing).ceil() as usize).clamp(0, 64);
+    (0..=n)
+        .map(|j| {
+            let s = if n == 0 {
+                0.0
+            } else {
+                -margin + 2.0 * margin * j as f64 / n as f64
+            };
+            let (x, y) = (o.x + o.vx * s, o.y + o.vy * s);
+            planner::Obstacle {
+                x,
+                y,
+                radius: clip_to_start(o.radius, x, y, px, py, r0),
+                vx: o.vx,
+                vy: o.vy,
+            }
+        })
+        .collect()
 }
 
 /// A finished replanning: the path (None when no feasible path exists) and its
@@ -376,63 +578,140 @@ pub struct PlanOutcome {
 /// Solve a replanning (pure: runs inline or on a planning thread). Among the feasible
 /// a6 it takes the cheapest whose path stays within the steering limit, since the
 /// method itself has none.
+///
+/// With moving obstacles in view ([`PlanRequest::pacing`]) the pace is a second free
+/// parameter: each pace sets t_f, every moving obstacle is swept over the time margin
+/// plus the schedule slip of that pace ([`sweep`], [`Pacing::schedule_slip`]), and the
+/// fastest pace with a feasible path is taken. The Qu et al. constraint is then a
+/// space-time one: the obstacle's predicted position at the instant the car is at each
+/// x. With no pace feasible the car stops (it yields).
 pub fn solve(req: &PlanRequest) -> PlanOutcome {
     let run = || -> Result<(Option<Trajectory>, PlanRecord), String> {
-        let problem = &req.problem;
-        let step =
-            planner::plan_with(problem, &PlanOptions::default()).map_err(|e| e.to_string())?;
-        let mut chosen = step.trajectory.clone();
-        let mut a6 = step.result.a6_chosen;
-        if step
-            .result
-            .max_abs_steering
-            .is_some_and(|s| s > req.steer_limit)
-        {
-            chosen = None;
-            a6 = None;
-            let line = planner::ReferenceLine::new(0.0, 0.0, problem.goal.x, 0.0)
-                .map_err(|e| e.to_string())?;
-            let mut best: Option<(f64, f64, Trajectory)> = None;
-            for candidate in candidates(step.result.a6_unconstrained, &step.result.feasible_set) {
-                let Ok(t) = problem.trajectory(candidate) else {
-                    continue;
-                };
-                if max_steer(&t) > req.steer_limit {
-                    continue;
+        if let Some(align) = &req.align {
+            let (_, mut record) = record(req, None, false);
+            record.align = align.steer(req.problem.vehicle_radius, req.steer_limit);
+            record.feasible = record.align.is_some();
+            return Ok((None, record));
+        }
+        let Some(pacing) = &req.pacing else {
+            let chosen = solve_one(&req.problem, req.steer_limit)?;
+            return Ok(record(req, chosen, false));
+        };
+        let p = &req.problem;
+        let span = p.goal.x - p.state.x;
+        let line = p.reference_line().map_err(|e| e.to_string())?;
+        let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
+        let mut best: Option<(f64, Chosen)> = None;
+        for &pace in &pacing.speeds {
+            let margin = pacing.time_margin + pacing.schedule_slip(pace);
+            let mut problem = p.clone();
+            problem.t_f = p.t_k + span / pace;
+            problem.obstacles = p
+                .obstacles
+                .iter()
+                .flat_map(|o| {
+                    if o.vx == 0.0 && o.vy == 0.0 {
+                        vec![*o]
+                    } else {
+                        sweep(o, margin, p.state.x, p.state.y, p.vehicle_radius)
+                    }
+                })
+                .collect();
+            if let Some(c) = solve_one(&problem, req.steer_limit)? {
+                let score = pacing.score(
+                    c.trajectory.path().reference_cost(&line) / span.abs(),
+                    pace,
+                    fastest,
+                );
+                if best.as_ref().is_none_or(|b| score < b.0) {
+                    best = Some((score, c));
                 }
-                let cost = t.path().reference_cost(&line);
-                if best.as_ref().is_none_or(|b| cost < b.0) {
-                    best = Some((cost, candidate, t));
-                }
-            }
-            if let Some((_, c, t)) = best {
-                a6 = Some(c);
-                chosen = Some(t);
             }
         }
-        let record = PlanRecord {
-            time: req.time,
-            feasible: chosen.is_some(),
-            a6,
-            projected_to_boundary: step.result.projected_to_boundary,
-            max_steer_deg: chosen.as_ref().map(|t| max_steer(t).to_degrees()),
-            path: chosen.as_ref().map_or_else(Vec::new, |t| {
-                let p = t.path();
-                (0..=40)
-                    .map(|j| {
-                        let x = p.x_k() + p.span() * f64::from(j) / 40.0;
-                        let (wx, wy) = req.frame.to_world(x, p.y(x));
-                        [wx, wy]
-                    })
-                    .collect()
-            }),
-        };
-        Ok((chosen, record))
+        Ok(record(req, best.map(|b| b.1), true))
     };
     PlanOutcome {
         time: req.time,
         result: run(),
     }
+}
+
+/// The chosen path of one planning problem: the planner's a6 when its path is within
+/// the steering limit, else the cheapest feasible a6 whose path is; None when none.
+fn solve_one(problem: &PlanProblem, steer_limit: f64) -> Result<Option<Chosen>, String> {
+    let step = planner::plan_with(problem, &PlanOptions::default()).map_err(|e| e.to_string())?;
+    let projected = step.result.projected_to_boundary;
+    let within = !step
+        .result
+        .max_abs_steering
+        .is_some_and(|s| s > steer_limit);
+    if within {
+        return Ok(step
+            .trajectory
+            .zip(step.result.a6_chosen)
+            .map(|(trajectory, a6)| Chosen {
+                trajectory,
+                a6,
+                projected,
+            }));
+    }
+    let line =
+        planner::ReferenceLine::new(0.0, 0.0, problem.goal.x, 0.0).map_err(|e| e.to_string())?;
+    let mut best: Option<(f64, f64, Trajectory)> = None;
+    for candidate in candidates(step.result.a6_unconstrained, &step.result.feasible_set) {
+        let Ok(t) = problem.trajectory(candidate) else {
+            continue;
+        };
+        if max_steer(&t) > steer_limit {
+            continue;
+        }
+        let cost = t.path().reference_cost(&line);
+        if best.as_ref().is_none_or(|b| cost < b.0) {
+            best = Some((cost, candidate, t));
+        }
+    }
+    Ok(best.map(|(_, a6, trajectory)| Chosen {
+        trajectory,
+        a6,
+        projected,
+    }))
+}
+
+/// A feasible path of one planning problem.
+struct Chosen {
+    trajectory: Trajectory,
+    a6: f64,
+    projected: bool,
+}
+
+fn record(
+    req: &PlanRequest,
+    chosen: Option<Chosen>,
+    moving: bool,
+) -> (Option<Trajectory>, PlanRecord) {
+    let record = PlanRecord {
+        time: req.time,
+        feasible: chosen.is_some(),
+        a6: chosen.as_ref().map(|c| c.a6),
+        projected_to_boundary: chosen.as_ref().is_some_and(|c| c.projected),
+        max_steer_deg: chosen
+            .as_ref()
+            .map(|c| max_steer(&c.trajectory).to_degrees()),
+        path: chosen.as_ref().map_or_else(Vec::new, |c| {
+            let p = c.trajectory.path();
+            (0..=40)
+                .map(|j| {
+                    let x = p.x_k() + p.span() * f64::from(j) / 40.0;
+                    let (wx, wy) = req.frame.to_world(x, p.y(x));
+                    [wx, wy]
+                })
+                .collect()
+        }),
+        pace: chosen.as_ref().map(|c| c.trajectory.w1()),
+        moving,
+        align: None,
+    };
+    (chosen.map(|c| c.trajectory), record)
 }
 
 /// Maximum steering angle along a path, radians.
@@ -589,5 +868,181 @@ mod tests {
             replan_and_follow(&mut nav, &pose, &[blocker]),
             Guidance::Stop { .. }
         ));
+    }
+
+    #[test]
+    fn a_moving_obstacle_is_swept_along_its_velocity_over_the_margin() {
+        let o = planner::Obstacle {
+            x: 10.0,
+            y: -3.0,
+            radius: 0.5,
+            vx: 0.0,
+            vy: 1.3,
+        };
+        let chain = sweep(&o, 1.0, 0.0, 0.0, 2.3);
+        let first = chain.first().expect("circles");
+        let last = chain.last().expect("circles");
+        assert!((first.y - (-4.3)).abs() < 1e-12 && (last.y - (-1.7)).abs() < 1e-12);
+        assert!(
+            chain
+                .iter()
+                .all(|c| c.vy == 1.3 && c.x == 10.0 && c.radius == 0.5)
+        );
+        let spacing = chain
+            .windows(2)
+            .map(|w| w[1].y - w[0].y)
+            .fold(0.0, f64::max);
+        assert!(spacing <= 0.5 * (0.5 + 2.3) + 1e-12, "{spacing}");
+        // A circle the car already overlaps is shrunk to just clear of it.
+        let near = sweep(&o, 1.0, 10.0, -6.0, 2.3);
+        assert!(near.iter().any(|c| c.radius < 0.5));
+        assert!(
+            near.iter()
+                .all(|c| (c.x - 10.0).hypot(c.y + 6.0) >= c.radius + 2.3 - 1e-9 || c.radius == 0.0)
+        );
+        // A static obstacle is one circle.
+        assert_eq!(
+            sweep(&planner::Obstacle { vy: 0.0, ..o }, 1.0, 0.0, 0.0, 2.3).len(),
+            1
+        );
+    }
+
+    #[test]
+    fn schedule_slip_and_pace_score() {
+        let pacing = Pacing {
+            speeds: vec![2.0, 1.0],
+            speed_now: 2.0,
+            accel: 1.0,
+            decel: 1.0,
+            time_margin: 1.0,
+            time_weight: 2.0,
+        };
+        assert_eq!(pacing.schedule_slip(2.0), 0.0);
+        // Slowing from 2 to 1 m/s at 1 m/s^2 takes 1 s and 1.5 m instead of 1 m.
+        assert!((pacing.schedule_slip(1.0) - 0.5).abs() < 1e-12);
+        // A straight path at half pace beats a 1.5 m swerve at full pace, not a 0.5 m one.
+        assert!(pacing.score(0.0, 1.0, 2.0) < pacing.score(1.5, 2.0, 2.0));
+        assert!(pacing.score(0.0, 1.0, 2.0) > pacing.score(0.5, 2.0, 2.0));
+    }
+
+    #[test]
+    fn a_crossing_obstacle_timed_to_meet_the_car_is_yielded_to() {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 35.0;
+        cfg.mission.goal_y = 0.0;
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = Pose {
+            x: 8.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 2.0,
+            phi: 0.0,
+        };
+        // At 2 m/s the car is at x = 16 in 4 s, when the obstacle crosses y = 0.
+        let crossing = Circle {
+            x: 16.0,
+            y: -5.2,
+            radius: 0.5,
+            vx: 0.0,
+            vy: 1.3,
+        };
+        let req = nav.request(0.0, &pose, &[crossing]);
+        assert!(req.pacing.is_some() && req.align.is_none());
+        let outcome = solve(&req);
+        let (trajectory, record) = outcome.result.clone().expect("planned");
+        let t = trajectory.expect("a feasible pace");
+        assert!(record.moving);
+        let pace = record.pace.expect("pace");
+        assert!(pace < cfg.planner.cruise_speed, "it slows down: {pace}");
+        // In space-time the path clears the obstacle's predicted track.
+        let obstacle = planner::Obstacle {
+            x: crossing.x,
+            y: crossing.y,
+            radius: crossing.radius,
+            vx: 0.0,
+            vy: 1.3,
+        };
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        let clearance = planner::min_clearance(&t, &obstacle, r0, &planner::Sampling::default());
+        assert!(clearance > 0.0, "{clearance}");
+        // The same obstacle taken as static at its position (the paper's planner)
+        // gives no reason to slow down.
+        let still = Circle {
+            vy: 0.0,
+            ..crossing
+        };
+        let (_, static_record) = solve(&nav.request(0.0, &pose, &[still]))
+            .result
+            .expect("planned");
+        assert!(!static_record.moving);
+        nav.accept(outcome);
+        match nav.follow(&pose) {
+            Guidance::Drive { speed, .. } => assert!(speed < cfg.planner.cruise_speed),
+            other => panic!("expected to drive, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_car_facing_away_turns_towards_the_goal_where_the_circle_is_clear() {
+        let cfg = ControllerConfig::default();
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        // The line points at 26.6 degrees; the car at 170 degrees (143 off, to the
+        // left): the short way round is a right turn.
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 170f64.to_radians(),
+            v: 0.0,
+            phi: 0.0,
+        };
+        let req = nav.request(0.0, &pose, &[]);
+        let align = req.align.clone().expect("align");
+        assert!(!align.prefer_left);
+        nav.accept(solve(&req));
+        let limit = (cfg.vehicle.max_steer_deg * cfg.planner.steer_usage).to_radians();
+        match nav.follow(&pose) {
+            Guidance::Drive { steer, speed, .. } => {
+                assert!((steer + limit).abs() < 1e-12, "{steer}");
+                assert_eq!(speed, cfg.planner.align_speed);
+            }
+            other => panic!("expected to turn, got {other:?}"),
+        }
+        // A post on the right turning circle: the long way round (left).
+        let r = cfg.vehicle.wheelbase / limit.tan();
+        let (cx, cy) = (r * pose.theta.sin(), -r * pose.theta.cos());
+        let post = Circle {
+            x: cx + r,
+            y: cy,
+            radius: 0.5,
+            vx: 0.0,
+            vy: 0.0,
+        };
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        let blocked = Align {
+            obstacles: vec![post],
+            ..align.clone()
+        };
+        assert!(!blocked.clear(false, r0));
+        assert_eq!(blocked.steer(r0, limit), Some(limit));
+        // Posts on both circles: stop.
+        let other = Circle {
+            x: -r * pose.theta.sin() - r,
+            y: r * pose.theta.cos(),
+            ..post
+        };
+        let boxed_in = Align {
+            obstacles: vec![post, other],
+            ..align
+        };
+        assert_eq!(boxed_in.steer(r0, limit), None);
+        // Within the exit angle, planning resumes.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let aligned = Pose {
+            theta: 40f64.to_radians(),
+            ..pose
+        };
+        assert!(nav.request(0.0, &aligned, &[]).align.is_none());
+        nav.accept(solve(&nav.request(0.0, &aligned, &[])));
+        assert!(matches!(nav.follow(&aligned), Guidance::Drive { .. }));
     }
 }

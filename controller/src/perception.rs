@@ -67,8 +67,16 @@
 //! The reported velocity is exactly zero when the estimated speed is below
 //! `velocity_dead_band` (0.1 m/s) or when the velocity is not significant against its
 //! own covariance (`v' P_vv^-1 v < velocity_significance_chi2`, 9.21: 99% for two
-//! degrees of freedom), so static obstacles read zero instead of the filter's jitter.
-//! The filter's own state is never clipped.
+//! degrees of freedom), so static obstacles read zero instead of the filter's jitter,
+//! and until the velocity has passed both tests on every scan for `moving_confirm_s`
+//! (0.5 s): a jump of the vehicle's own position estimate (a GPS fix changing quality
+//! shifts every obstacle in the world frame at once) or a fragment briefly looks like
+//! motion, and a post taken for a moving obstacle makes the planner sweep it in time
+//! and yield to it for nothing. The filter's own state is never clipped.
+//!
+//! A measurement that matches no track but is centred inside a confirmed track's
+//! circle is a fragment of that object (a partial view, a cluster split by beam
+//! dropouts) and starts no new track.
 //!
 //! # What the planner gets
 //!
@@ -89,7 +97,10 @@
 //! Only obstacles whose nearest point is within `detection_radius` (the paper's 8 m)
 //! of the vehicle's reference point (the rear axle centre, the pose's origin) are
 //! reported; tracking goes on beyond it so that velocities have converged when an
-//! obstacle enters the radius.
+//! obstacle enters the radius. Moving obstacles (a reported velocity that is not zero)
+//! are reported out to `moving_detection_radius` (16 m): the car closes on them at the
+//! sum of both speeds, and the planner needs them early enough to yield or swerve
+//! (an obstacle walking head-on at 0.8 m/s entering 8 m leaves under 3 s).
 
 mod cluster;
 mod config;

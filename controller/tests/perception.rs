@@ -961,4 +961,99 @@ mod perception {
         assert_eq!(partial.min_points, cfg.min_points);
         assert!(serde_json::from_str::<PerceptionConfig>(r#"{"detection_radiu": 10.0}"#).is_err());
     }
+
+    #[test]
+    fn moving_obstacles_are_reported_out_to_the_moving_detection_radius() {
+        let cfg = PerceptionConfig::default();
+        let mount = default_mount();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let mut p = Perception::new(cfg.clone()).expect("config");
+        let mut rng = Rng(17);
+        let mut last = None;
+        // A pedestrian 13 m ahead walking towards the car, and a post 12 m ahead.
+        for k in 0..=60 {
+            let t = k as f64 / RATE;
+            let world = [
+                Shape::Circle {
+                    c: [13.0 - 0.8 * t, 1.0],
+                    r: 0.35,
+                },
+                Shape::Circle {
+                    c: [12.0, -3.0],
+                    r: 0.4,
+                },
+            ];
+            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
+            let out = p
+                .update(&LMS111.scan(t, &ranges), &mount, &pose)
+                .expect("valid");
+            if k < 20 {
+                assert!(
+                    out.obstacles.is_empty(),
+                    "k {k}: nothing within 8 m, no velocity confirmed yet: {:?}",
+                    out.obstacles
+                );
+            }
+            last = Some(out);
+        }
+        let out = last.expect("scans");
+        assert_eq!(out.obstacles.len(), 1, "{:?}", out.obstacles);
+        let o = out.obstacles[0];
+        assert!(o.x > 8.0 && (o.vx + 0.8).abs() < 0.2, "{o:?}");
+        assert_eq!(p.all_tracks().len(), 2);
+        // With the moving radius at the static one, neither is reported.
+        let mut narrow = Perception::new(PerceptionConfig {
+            moving_detection_radius: cfg.detection_radius,
+            ..cfg
+        })
+        .expect("config");
+        let world = [Shape::Circle {
+            c: [13.0, 1.0],
+            r: 0.35,
+        }];
+        for k in 0..10 {
+            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
+            let out = narrow
+                .update(&LMS111.scan(k as f64 / RATE, &ranges), &mount, &pose)
+                .expect("valid");
+            assert!(out.obstacles.is_empty());
+        }
+    }
+
+    #[test]
+    fn a_jump_of_the_vehicle_position_does_not_make_a_post_move() {
+        let cfg = PerceptionConfig::default();
+        let mount = default_mount();
+        let mut p = Perception::new(cfg).expect("config");
+        let mut rng = Rng(23);
+        let post = [Shape::Circle {
+            c: [6.0, 0.5],
+            r: 0.5,
+        }];
+        let mut nonzero = 0;
+        for k in 0..=100 {
+            let t = k as f64 / RATE;
+            let truth = Pose2::new(0.0, 0.0, 0.0);
+            let ranges = LMS111.ranges(&post, &truth, &mount, &mut rng, SIGMA);
+            // From 0.5 s on the pose estimate is 0.3 m off (RTK fixed to float): every
+            // obstacle jumps by that much in the world frame.
+            let believed = if k >= 25 {
+                Pose2::new(0.3, -0.1, 0.0)
+            } else {
+                truth
+            };
+            let out = p
+                .update(&LMS111.scan(t, &ranges), &mount, &believed)
+                .expect("valid");
+            for o in &out.obstacles {
+                if o.vx != 0.0 || o.vy != 0.0 {
+                    nonzero += 1;
+                }
+            }
+            if k > 10 {
+                assert_eq!(out.obstacles.len(), 1, "k {k}: {:?}", out.obstacles);
+            }
+        }
+        assert_eq!(nonzero, 0, "the jump was never reported as motion");
+    }
 }

@@ -11,6 +11,10 @@ pub struct PerceptionConfig {
     /// Obstacles whose nearest point is farther than this from the vehicle's reference
     /// point are not reported (the paper: 8 m).
     pub detection_radius: f64,
+    /// Moving obstacles (a reported velocity that is not zero) are reported out to this
+    /// distance instead: the car closes on them faster, so it must see them earlier
+    /// (the larger of the two applies).
+    pub moving_detection_radius: f64,
     /// The scanner's range noise (1 sigma); LMS111: 12 mm.
     pub range_noise_sigma: f64,
 
@@ -85,12 +89,18 @@ pub struct PerceptionConfig {
     pub velocity_dead_band: f64,
     /// Velocities with v' P_vv^-1 v below this are reported as zero (0 disables).
     pub velocity_significance_chi2: f64,
+    /// A velocity is reported only once it has passed the dead band and the
+    /// significance test on every scan for this long, seconds: a jump of the vehicle's
+    /// own position (a GPS fix changing quality) or a fragment of an object briefly
+    /// looks like motion and must not make a post a moving obstacle.
+    pub moving_confirm_s: f64,
 }
 
 impl Default for PerceptionConfig {
     fn default() -> Self {
         PerceptionConfig {
             detection_radius: 8.0,
+            moving_detection_radius: 16.0,
             range_noise_sigma: 0.012,
             breakpoint_lambda_deg: 10.0,
             breakpoint_noise_factor: 3.0,
@@ -123,6 +133,7 @@ impl Default for PerceptionConfig {
             radius_process_sigma: 0.02,
             velocity_dead_band: 0.1,
             velocity_significance_chi2: 9.21,
+            moving_confirm_s: 0.5,
         }
     }
 }
@@ -160,6 +171,8 @@ impl PerceptionConfig {
     /// Checks every field's domain.
     pub fn validate(&self) -> Result<(), PerceptionError> {
         positive("detection_radius", self.detection_radius)?;
+        positive("moving_detection_radius", self.moving_detection_radius)?;
+        non_negative("moving_confirm_s", self.moving_confirm_s)?;
         positive("range_noise_sigma", self.range_noise_sigma)?;
         if !(self.breakpoint_lambda_deg > 0.0 && self.breakpoint_lambda_deg < 90.0) {
             return Err(invalid(

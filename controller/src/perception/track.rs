@@ -158,6 +158,8 @@ struct PointTrack {
     radius_var: f64,
     kind: ObstacleKind,
     life: Life,
+    /// Since when the velocity has been significant on every scan.
+    moving_since: Option<f64>,
 }
 
 impl PointTrack {
@@ -187,6 +189,7 @@ impl PointTrack {
             radius_var: m.radius_variance + cfg.range_noise_sigma * cfg.range_noise_sigma,
             kind: m.kind,
             life: Life::new(stamp, cfg),
+            moving_since: None,
         };
         let r = track.measurement_covariance(m, cfg);
         track.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
@@ -256,21 +259,42 @@ impl PointTrack {
         self.life.record(true, cfg);
     }
 
-    fn reported_velocity(&self, cfg: &PerceptionConfig) -> [f64; 2] {
+    /// The filter's velocity passes the dead band and the significance test.
+    fn velocity_significant(&self, cfg: &PerceptionConfig) -> bool {
         let v = Vector2::new(self.state[2], self.state[3]);
         if v.norm() < cfg.velocity_dead_band {
-            return [0.0, 0.0];
+            return false;
         }
         if cfg.velocity_significance_chi2 > 0.0 {
             let pvv: Matrix2<f64> = self.cov.fixed_view::<2, 2>(2, 2).into_owned();
             if let Some(inv) = pvv.try_inverse() {
                 let m2 = (v.transpose() * inv * v)[(0, 0)];
                 if m2 < cfg.velocity_significance_chi2 {
-                    return [0.0, 0.0];
+                    return false;
                 }
             }
         }
-        [v[0], v[1]]
+        true
+    }
+
+    /// Track the persistence of a significant velocity at `stamp`.
+    fn note_motion(&mut self, stamp: f64, cfg: &PerceptionConfig) {
+        if self.velocity_significant(cfg) {
+            self.moving_since.get_or_insert(stamp);
+        } else {
+            self.moving_since = None;
+        }
+    }
+
+    /// The velocity to report at `stamp`: zero unless significant for
+    /// `moving_confirm_s`.
+    fn reported_velocity(&self, stamp: f64, cfg: &PerceptionConfig) -> [f64; 2] {
+        match self.moving_since {
+            Some(since) if stamp - since >= cfg.moving_confirm_s - 1e-9 => {
+                [self.state[2], self.state[3]]
+            }
+            _ => [0.0, 0.0],
+        }
     }
 }
 
@@ -426,8 +450,18 @@ impl Perception {
             }
         }
         self.tracks.retain(|t| !t.life.dead(cfg));
+        for t in &mut self.tracks {
+            t.note_motion(stamp, cfg);
+        }
         for (m, t) in detections.circles.iter().zip(&track_of) {
-            if t.is_none() {
+            // A measurement centred inside a confirmed track's circle is a fragment of
+            // that object (a partial view, a cluster split by dropouts), not a new one.
+            let fragment = self.tracks.iter().any(|t| {
+                t.life.confirmed
+                    && (t.state[0] - m.centre[0]).hypot(t.state[1] - m.centre[1])
+                        < t.radius.max(m.radius)
+            });
+            if t.is_none() && !fragment {
                 self.tracks
                     .push(PointTrack::new(self.next_id, m, stamp, cfg));
                 self.next_id += 1;
@@ -486,19 +520,25 @@ impl Perception {
 
     fn output(&self, stamp: f64, pose: &Pose2, filtered: bool) -> PerceptionOutput {
         let cfg = &self.cfg;
-        let within = |x: f64, y: f64, r: f64| {
-            !filtered || (x - pose.x).hypot(y - pose.y) - r <= cfg.detection_radius
+        let within_radius = |x: f64, y: f64, r: f64, radius: f64| {
+            !filtered || (x - pose.x).hypot(y - pose.y) - r <= radius
         };
+        let within = |x: f64, y: f64, r: f64| within_radius(x, y, r, cfg.detection_radius);
         let mut obstacles = Vec::new();
         for t in &self.tracks {
             if filtered && !t.life.confirmed {
                 continue;
             }
             let (x, y) = (t.state[0], t.state[1]);
-            if !within(x, y, t.radius) {
+            let [vx, vy] = t.reported_velocity(stamp, cfg);
+            let radius = if vx != 0.0 || vy != 0.0 {
+                cfg.moving_detection_radius.max(cfg.detection_radius)
+            } else {
+                cfg.detection_radius
+            };
+            if !within_radius(x, y, t.radius, radius) {
                 continue;
             }
-            let [vx, vy] = t.reported_velocity(cfg);
             obstacles.push(TrackedObstacle {
                 id: t.id,
                 part: 0,
