@@ -7,11 +7,14 @@
 //! - [`laser`]: the laser scan frame and its iceoryx2 publisher/subscriber.
 //! - [`cola`]: the physical SICK laser over Ethernet (CoLa-A): scan telegrams, a
 //!   scanner emulation serving laser frames, and the driver behind `ugv-sick`.
+//! - [`gateway`]: the CAN gateway (`ugv-bridge`) between the simulator's bus and a
+//!   physical one, routed by the DBC's senders and receivers.
 //! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
 
 pub mod can;
 pub mod clock;
 pub mod cola;
+pub mod gateway;
 pub mod geodesy;
 pub mod laser;
 pub mod nmea;
