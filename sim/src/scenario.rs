@@ -165,6 +165,10 @@ pub struct SteeringConfig {
     /// Motor current at rest and per deg/s of rate, amperes (for the report).
     pub idle_current_a: f64,
     pub current_per_rate_a: f64,
+    /// A disturbance: the angle sensor's zero is off by this much, so the road wheels
+    /// stand at the commanded (and reported) angle plus this bias, degrees (0: none;
+    /// at most 10).
+    pub bias_deg: f64,
 }
 
 impl Default for SteeringConfig {
@@ -176,6 +180,7 @@ impl Default for SteeringConfig {
             max_rate_deg_s: 60.0,
             idle_current_a: 0.5,
             current_per_rate_a: 0.12,
+            bias_deg: 0.0,
         }
     }
 }
@@ -540,6 +545,13 @@ impl Scenario {
             &[Key("steering"), Key("current_per_rate_a")],
             s.current_per_rate_a,
         )?;
+        finite(&[Key("steering"), Key("bias_deg")], s.bias_deg)?;
+        if s.bias_deg.abs() > 10.0 {
+            return Err(bad(
+                &[Key("steering"), Key("bias_deg")],
+                format!("must be within [-10, 10] degrees, is {}", s.bias_deg),
+            ));
+        }
         let t = &self.throttle;
         non_negative(&[Key("throttle"), Key("dead_time_s")], t.dead_time_s)?;
         positive(

@@ -1,5 +1,6 @@
 //! The simulated steering ECU: dead time, first-order lag, rate limit and angle limit
-//! on the road-wheel angle; holds its angle in the safe state.
+//! on the road-wheel angle; holds its angle in the safe state. A disturbance: a bias
+//! of the angle sensor (`bias_deg`), so the wheels stand off the reported angle.
 
 use std::collections::VecDeque;
 
@@ -81,13 +82,15 @@ impl SteeringEcu {
         self.angle_deg = next;
     }
 
-    /// The actual road-wheel angle, radians.
+    /// The actual road-wheel angle, radians: the servoed (reported) angle plus the
+    /// sensor bias, within the mechanical limit.
     pub fn angle(&self) -> f64 {
-        self.angle_deg.to_radians()
+        self.angle_deg().to_radians()
     }
 
+    /// The actual road-wheel angle, degrees.
     pub fn angle_deg(&self) -> f64 {
-        self.angle_deg
+        (self.angle_deg + self.cfg.bias_deg).clamp(-self.limit_deg, self.limit_deg)
     }
 
     pub fn rate_deg_s(&self) -> f64 {
@@ -112,5 +115,95 @@ impl SteeringEcu {
                 + self.cfg.current_per_rate_a * self.rate_deg_s.abs())
             .clamp(0.0, 25.5),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ecu::safety::{Safety, SafetyTiming};
+    use golf_car_can::ControllerHeartbeatState;
+
+    fn safety() -> Safety {
+        Safety::new(SafetyTiming {
+            command_timeout: 1.0,
+            heartbeat_timeout: 1.0,
+            fault_clear: 0.25,
+        })
+    }
+
+    fn settled(bias_deg: f64) -> SteeringEcu {
+        let cfg = SteeringConfig {
+            bias_deg,
+            ..SteeringConfig::default()
+        };
+        let mut ecu = SteeringEcu::new(cfg, 35.0, safety());
+        let dt = 0.005;
+        for k in 0..400 {
+            let now = f64::from(k) * dt;
+            if k % 2 == 0 {
+                ecu.on_command(
+                    now,
+                    &SteeringCmd {
+                        enable: k > 10,
+                        target_angle: 10.0,
+                        max_rate: 0.0,
+                    },
+                );
+                ecu.safety.on_heartbeat(now, ControllerHeartbeatState::Auto);
+            }
+            ecu.step(now, dt);
+        }
+        ecu
+    }
+
+    #[test]
+    fn a_sensor_bias_offsets_the_wheels_but_not_the_report() {
+        let nominal = settled(0.0);
+        assert!(
+            (nominal.angle_deg() - 10.0).abs() < 1e-6,
+            "{}",
+            nominal.angle_deg()
+        );
+        let biased = settled(2.0);
+        assert!(
+            (biased.angle_deg() - 12.0).abs() < 1e-6,
+            "{}",
+            biased.angle_deg()
+        );
+        assert!((biased.angle() - 12f64.to_radians()).abs() < 1e-9);
+        assert!(
+            (biased.report().angle - 10.0).abs() < 1e-6,
+            "the ECU reports its sensor"
+        );
+        // The mechanical limit still holds.
+        let mut ecu = settled(5.0);
+        ecu.on_command(
+            2.0,
+            &SteeringCmd {
+                enable: true,
+                target_angle: 35.0,
+                max_rate: 0.0,
+            },
+        );
+        for k in 0..400 {
+            ecu.safety
+                .on_heartbeat(2.0 + f64::from(k) * 0.005, ControllerHeartbeatState::Auto);
+            ecu.step(2.0 + f64::from(k) * 0.005, 0.005);
+        }
+        assert_eq!(ecu.angle_deg(), 35.0);
+    }
+
+    #[test]
+    fn a_bias_is_validated_and_defaults_to_none() {
+        use crate::scenario::Scenario;
+        assert_eq!(SteeringConfig::default().bias_deg, 0.0);
+        let ok = Scenario::from_toml("[steering]\nbias_deg = -2.5\n", "ok.toml");
+        assert_eq!(ok.map(|s| s.steering.bias_deg).ok(), Some(-2.5));
+        let err = Scenario::from_toml("[steering]\nbias_deg = 12.0\n", "bad.toml")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("bad.toml:2: steering.bias_deg"), "{err}");
     }
 }
