@@ -77,6 +77,39 @@
 //! scan and its transmission (`time of transmission - time since start-up`).
 //! `scan_time` is `100 / scan frequency`, `time_increment` is
 //! `1 / (measurement frequency * 100)`.
+//!
+//! # Example
+//!
+//! The simulator serves its laser as an LMS111; a driver (or `ugv-sick`) reads it:
+//!
+//! ```
+//! use std::time::Duration;
+//! use firmware_bridge::cola::{ClientConfig, ColaClient, ColaServer, ServerConfig};
+//! use firmware_bridge::laser::LaserFrame;
+//!
+//! let server = ColaServer::bind("127.0.0.1:0", ServerConfig::lms111()).unwrap();
+//! let address = server.local_addr().to_string();
+//! let mut driver = ColaClient::connect(&address, ClientConfig::default()).unwrap();
+//! assert_eq!(driver.device_ident().name, "LMS111");
+//!
+//! let mut frame = LaserFrame {
+//!     sequence: 7,
+//!     angle_min: -135f32.to_radians(),
+//!     angle_increment: 0.5f32.to_radians(),
+//!     scan_time: 0.02,
+//!     time_increment: 0.02 / 720.0,
+//!     range_min: 0.5,
+//!     range_max: 20.0,
+//!     ..LaserFrame::default()
+//! };
+//! frame.set_beams(&[1.2345, f32::INFINITY, f32::NAN], &[10.0, 0.0, 0.0]).unwrap();
+//! assert_eq!(server.publish(&frame).unwrap(), 1); // queued for one client, never waits
+//!
+//! let got = driver.next_frame(Duration::from_secs(10)).unwrap().unwrap();
+//! assert_eq!(got.sequence, 7);
+//! assert!((got.ranges[0] - 1.2345).abs() <= 0.0005); // millimetres on the wire
+//! assert!(got.ranges[1].is_infinite() && got.ranges[2].is_nan());
+//! ```
 
 pub mod client;
 pub mod convert;

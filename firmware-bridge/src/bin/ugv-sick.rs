@@ -188,11 +188,14 @@ fn run(args: &Args) -> anyhow::Result<()> {
                     Err(e) => {
                         total.publish_errors += 1;
                         window.publish_errors += 1;
-                        tracing::warn!(
-                            "scan {} not published on {}: {e}",
-                            frame.sequence,
-                            args.service
-                        );
+                        if total.publish_errors <= 10 || total.publish_errors.is_power_of_two() {
+                            tracing::warn!(
+                                "scan {} not published on {} ({} so far): {e}",
+                                frame.sequence,
+                                args.service,
+                                total.publish_errors
+                            );
+                        }
                     }
                 }
                 if args.count.is_some_and(|n| total.published >= n) {
