@@ -18,14 +18,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
+use chrono::Timelike;
 use clap::{Args, Parser, Subcommand};
 use firmware_bridge::CanPort;
-use firmware_bridge::clock::{Clock, WallClock};
+use firmware_bridge::clock::{Clock, WallClock, monotonic_ns};
 use firmware_bridge::laser::LaserSubscriber;
 use firmware_bridge::nmea::{NmeaLink, ReadEvent, ReaderConfig, open_serial};
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode, scan_of};
-use ugv_controller::trace::Trace;
+use ugv_controller::trace::{FixTiming, Trace};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -218,6 +219,9 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();
     let mut k: u64 = 0;
+    // Fixes read and not yet followed by a steering command: (UTC s of day, read ns).
+    let mut unanswered: Vec<(f64, u64)> = Vec::new();
+    let mut fix_timing = Vec::new();
     let code = loop {
         clock.wait_tick(k);
         let now = k as f64 * COMMAND_PERIOD;
@@ -227,6 +231,12 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         }
         for event in gps.poll()? {
             if let ReadEvent::Fix(reading) = event {
+                if let Some(t) = reading.time {
+                    unanswered.push((
+                        f64::from(t.num_seconds_from_midnight()) + f64::from(t.nanosecond()) * 1e-9,
+                        monotonic_ns(),
+                    ));
+                }
                 ctl.on_gps(now, &reading);
             }
         }
@@ -235,6 +245,14 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         }
         for m in ctl.tick(now) {
             can.send_message(&m)?;
+            if matches!(m, golf_car_can::GolfCarMessage::SteeringCmd(_)) {
+                let sent = monotonic_ns();
+                fix_timing.extend(unanswered.drain(..).map(|(utc_s, read_ns)| FixTiming {
+                    utc_s,
+                    read_ns,
+                    command_ns: sent,
+                }));
+            }
         }
         if status_ticks > 0 && k % status_ticks == 0 {
             let line = match ctl.pose(now) {
@@ -279,7 +297,8 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         eprintln!();
     }
     eprintln!("ugv-controller: {:?}; CAN {:?}", ctl.mode(), can.stats());
-    let trace = Trace::of(&ctl, clock.now());
+    let mut trace = Trace::of(&ctl, clock.now());
+    trace.fix_timing = fix_timing;
     if let Some(path) = &args.trace {
         std::fs::write(path, serde_json::to_string(&trace)?)
             .with_context(|| format!("writing {}", path.display()))?;

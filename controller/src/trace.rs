@@ -16,6 +16,23 @@ pub struct Trace {
     pub samples: Vec<Sample>,
     pub plans: Vec<PlanRecord>,
     pub obstacles: Vec<Circle>,
+    /// When each GPS fix came in and when the first steering command computed with it
+    /// went out (the binary on the wires; empty in SIL).
+    #[serde(default)]
+    pub fix_timing: Vec<FixTiming>,
+}
+
+/// One GPS fix through the controller, on the machine's monotonic clock
+/// (`firmware_bridge::clock::monotonic_ns`), so the simulator can put it beside the
+/// moment it made the fix.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct FixTiming {
+    /// The fix's UTC time of day, seconds.
+    pub utc_s: f64,
+    /// When the reader completed the fix.
+    pub read_ns: u64,
+    /// When the first STEERING_CMD after it was sent.
+    pub command_ns: u64,
 }
 
 impl Trace {
@@ -34,6 +51,7 @@ impl Trace {
             samples: ctl.samples.clone(),
             plans: ctl.nav.plans.clone(),
             obstacles: ctl.obstacles().to_vec(),
+            fix_timing: Vec::new(),
         }
     }
 

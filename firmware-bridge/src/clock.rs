@@ -16,15 +16,32 @@ pub trait Clock {
 #[derive(Debug)]
 pub struct WallClock {
     start: Instant,
+    start_ns: u64,
     dt: f64,
+}
+
+/// CLOCK_MONOTONIC in nanoseconds: one time base for every process on the machine, so
+/// the simulator and the controller can put their events on one axis (latencies
+/// across the wires).
+pub fn monotonic_ns() -> u64 {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC).map_or(0, |t| {
+        u64::try_from(t.tv_sec()).unwrap_or(0) * 1_000_000_000
+            + u64::try_from(t.tv_nsec()).unwrap_or(0)
+    })
 }
 
 impl WallClock {
     pub fn new(dt: f64) -> WallClock {
         WallClock {
             start: Instant::now(),
+            start_ns: monotonic_ns(),
             dt,
         }
+    }
+
+    /// [`monotonic_ns`] at the start (tick 0).
+    pub fn start_monotonic_ns(&self) -> u64 {
+        self.start_ns
     }
 
     /// The instant tick `k` is due.

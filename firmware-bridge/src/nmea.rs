@@ -70,7 +70,7 @@ use std::path::PathBuf;
 
 pub use framing::{Framed, LineFramer, MAX_SENTENCE_LEN, checksum};
 pub use reader::{GpsReading, NmeaReader, ReadEvent, ReaderConfig, ReaderStats};
-pub use serial::{NmeaLink, PtyEndpoint, open_serial};
+pub use serial::{NmeaLink, PtyEndpoint, SerialEndpoint, open_serial};
 pub use types::{
     Accuracy, FixQuality, GpsFix, HeadingMode, NavStatus, PositioningMode, SentenceKind,
     SentenceSet, Talker,

@@ -4,6 +4,8 @@
 //! ugv-sim run [SCENARIO] --controller target/release/ugv-controller   HIL, the real wires
 //! ugv-sim run [SCENARIO] --wait-for-controller                        HIL, your controller
 //! ugv-sim run [SCENARIO] --sil                                        lockstep, in-process
+//! ugv-sim suite DIR                                                   a folder of scenarios
+//! ugv-sim ecu steering --can vcan1                                    one ECU, standalone
 //! ugv-sim check SCENARIO...                                           validate scenario files
 //! ```
 //!
@@ -15,17 +17,20 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use firmware_bridge::CanPort;
+use firmware_bridge::clock::WallClock;
 use ugv_controller::config::FollowerKind;
-use ugv_sim::hil::{Wires, run_hil, spawn_controller, wait_for_controller};
+use ugv_sim::devices::map::DeviceMap;
+use ugv_sim::ecu::EcuKind;
+use ugv_sim::ecu::station::run_standalone;
+use ugv_sim::hil::{self, HilOptions};
 use ugv_sim::mission::controller_config;
 use ugv_sim::run::Snapshot;
 use ugv_sim::verdict::{Verdict, write_results};
-use ugv_sim::{Outcome, Scenario, Sim};
+use ugv_sim::{Outcome, Scenario};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -45,19 +50,21 @@ enum Command {
     Run(RunArgs),
     /// Run every scenario of a folder in SIL, in parallel, and write summary.md,
     /// summary.json and junit.xml. Exit code 0 when all pass, 1 otherwise.
-    Suite {
-        /// The folder of scenario files (*.toml).
-        dir: PathBuf,
-        /// Where the summaries go.
-        #[arg(long, default_value = "results/suite")]
-        results: PathBuf,
-        /// Parallel runs; default: the number of cores.
+    Suite(SuiteArgs),
+    /// Run one simulated ECU alone on a CAN interface, in real time, as a stand-in for
+    /// the hardware on a bench (for example on the physical side of ugv-bridge).
+    Ecu {
+        #[arg(value_enum)]
+        kind: EcuKind,
+        /// The CAN interface to sit on.
         #[arg(long)]
-        jobs: Option<usize>,
-        #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
-        follower: FollowerKind,
+        can: String,
+        /// The ECU's parameters come from this scenario (the paper's when absent).
         #[arg(long)]
-        anfis_model: Option<PathBuf>,
+        scenario: Option<PathBuf>,
+        /// Seconds between status lines.
+        #[arg(long, default_value_t = 1.0)]
+        status_every: f64,
     },
     /// Validate scenario files: parse, check every field, and report the first error
     /// of each with its file, line and field.
@@ -65,6 +72,33 @@ enum Command {
         #[arg(required = true)]
         scenarios: Vec<PathBuf>,
     },
+}
+
+#[derive(clap::Args, Debug)]
+struct SuiteArgs {
+    /// The folder of scenario files (*.toml).
+    dir: PathBuf,
+    /// Where the summaries go (and, in HIL, each run's results in a folder of its own).
+    #[arg(long, default_value = "results/suite")]
+    results: PathBuf,
+    /// Parallel runs in SIL; default: the number of cores. In HIL one run per --can
+    /// interface at a time.
+    #[arg(long)]
+    jobs: Option<usize>,
+    #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
+    follower: FollowerKind,
+    #[arg(long)]
+    anfis_model: Option<PathBuf>,
+    /// Run each scenario in HIL, in real time on the wires, with the controller binary.
+    #[arg(long)]
+    hil: bool,
+    /// The controller binary for --hil; default: ugv-controller beside ugv-sim.
+    #[arg(long, value_name = "BINARY")]
+    controller: Option<PathBuf>,
+    /// CAN interfaces for --hil (repeatable): each one carries one run at a time, so
+    /// N interfaces run N scenarios in parallel. Default: each scenario's own.
+    #[arg(long = "can")]
+    cans: Vec<String>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -78,6 +112,10 @@ struct RunArgs {
     /// CAN interface of the simulated ECUs (overrides the scenario's can.interface).
     #[arg(long)]
     can: Option<String>,
+    /// A bench file: a `[devices]` section saying which devices are physical and
+    /// where (overrides the scenario's); see the README.
+    #[arg(long, value_name = "FILE")]
+    devices: Option<PathBuf>,
     /// End the run after this many seconds (overrides sim.time_limit_s).
     #[arg(long)]
     time_limit: Option<f64>,
@@ -172,14 +210,61 @@ fn run(cli: Cli) -> Result<ExitCode> {
             })
         }
         Command::Run(args) => run_scenario(args),
-        Command::Suite {
-            dir,
-            results,
-            jobs,
-            follower,
-            anfis_model,
-        } => run_suite(&dir, &results, jobs, follower, anfis_model),
+        Command::Ecu {
+            kind,
+            can,
+            scenario,
+            status_every,
+        } => run_ecu(kind, &can, scenario.as_ref(), status_every),
+        Command::Suite(args) => run_suite(args),
     }
+}
+
+/// Ctrl-C and SIGTERM raise the returned flag.
+fn stop_on_signal() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
+}
+
+fn run_ecu(
+    kind: EcuKind,
+    can: &str,
+    scenario: Option<&PathBuf>,
+    status_every: f64,
+) -> Result<ExitCode> {
+    anyhow::ensure!(
+        status_every > 0.0 && status_every.is_finite(),
+        "--status-every must be positive"
+    );
+    let sc = Scenario::load_or_paper(scenario)?;
+    let port = CanPort::open(can).with_context(|| format!("{kind:?} ECU on {can}"))?;
+    let stop = stop_on_signal()?;
+    eprintln!(
+        "ugv-sim: simulated {kind:?} ECU on {can} (parameters of scenario {:?}), {} Hz; Ctrl-C ends it",
+        sc.name, sc.sim.physics_hz
+    );
+    let mut clock = WallClock::new(1.0 / sc.sim.physics_hz);
+    let fin = run_standalone(kind, &sc, port, &mut clock, &stop, status_every, &mut |s| {
+        let unit = match kind {
+            EcuKind::Steering => "°",
+            EcuKind::Throttle => " m/s",
+        };
+        eprintln!(
+            "t={:8.2}s {}{} {:7.2}{unit} sent {} e2e ok {} rejected {}",
+            s.time,
+            if s.enabled { "enabled" } else { "disabled" },
+            s.fault.map(|c| format!(" SAFE({c:?})")).unwrap_or_default(),
+            s.value,
+            s.stats.sent,
+            s.stats.e2e.accepted,
+            s.stats.e2e.rejected(),
+        );
+    })?;
+    println!("{}", serde_json::to_string_pretty(&fin)?);
+    Ok(ExitCode::SUCCESS)
 }
 
 fn exit_code(outcome: &Outcome) -> u8 {
@@ -195,6 +280,13 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     let mut sc = Scenario::load_or_paper(args.scenario.as_ref())?;
     if let Some(iface) = &args.can {
         sc.can.interface = iface.clone();
+    }
+    if let Some(bench) = &args.devices {
+        sc.devices = DeviceMap::load(bench, &sc.can.interface)?;
+    } else {
+        sc.devices
+            .validate(&sc.can.interface)
+            .map_err(|e| anyhow::anyhow!("devices.{}.{}: {}", e.path[0], e.path[1], e.message))?;
     }
     if let Some(limit) = args.time_limit {
         anyhow::ensure!(
@@ -235,73 +327,32 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         return Ok(ExitCode::from(exit_code(&run.outcome)));
     }
 
-    let iface = sc.can.interface.clone();
     let run_id = args
         .run_id
         .clone()
         .unwrap_or_else(|| format!("{}-{}", sc.name, std::process::id()));
-    let gps_link = args
-        .gps_link
-        .clone()
-        .unwrap_or_else(|| std::env::temp_dir().join(format!("ugv-hil-{run_id}-gps")));
-    let steering = CanPort::open(&iface).context("steering ECU")?;
-    let throttle = CanPort::open(&iface).context("throttle ECU")?;
-    let mut sim = Sim::new(sc.clone(), steering, throttle).with_sensors()?;
-    let mut wires = Wires::open(&sim, &gps_link, &run_id)?;
-    eprintln!(
-        "ugv-sim: wires: GPS {} ({} baud), laser iceoryx2 service {:?}, CAN {} (steering and throttle ECUs, golf_car.dbc)",
-        wires.map.gps_link.display(),
-        wires.map.gps_baud,
-        wires.map.laser_service,
-        wires.map.can
-    );
-    std::fs::write(
-        args.results.join("wires.json"),
-        serde_json::to_string_pretty(&wires.map)?,
-    )?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = Arc::clone(&stop);
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-
-    let mut controller = match &args.controller {
-        Some(binary) => {
-            let config = args.results.join("controller.toml");
-            std::fs::write(&config, toml::to_string_pretty(&cfg)?)?;
-            let trace = args.results.join("controller-trace.json");
-            let _ = std::fs::remove_file(&trace);
-            eprintln!(
-                "ugv-sim: starting {} (configuration {})",
-                binary.display(),
-                config.display()
-            );
-            Some(spawn_controller(
-                binary,
-                &config,
-                &wires.map,
-                &trace,
-                &args.controller_args,
-            )?)
-        }
-        None => None,
+    let options = HilOptions {
+        controller: args.controller.clone(),
+        controller_args: args.controller_args.clone(),
+        wait_for_controller: args.wait_for_controller,
+        gps_link: args.gps_link.clone(),
+        run_id,
+        results: args.results.clone(),
+        status_every: args.status_every,
     };
-    if args.wait_for_controller && controller.is_none() {
-        eprintln!("ugv-sim: waiting for a controller heartbeat on {iface}");
-        if !wait_for_controller(&iface, Duration::from_secs(60), &stop)? {
-            return Ok(ExitCode::from(3));
-        }
-    }
-    eprintln!(
-        "ugv-sim: physics {} Hz, time limit {} s; Ctrl-C ends the run",
-        sc.sim.physics_hz, sc.sim.time_limit_s
-    );
+    let stop = stop_on_signal()?;
     let tty = std::io::stderr().is_terminal();
-    let outcome = run_hil(
-        &mut sim,
-        &mut wires,
-        controller.as_mut(),
+    let (verdict, outcome) = hil::run_scenario(
+        &sc,
+        &cfg,
+        &options,
         &stop,
-        args.status_every,
+        &mut |line| {
+            if tty {
+                eprint!("\r\x1b[2K");
+            }
+            eprintln!("ugv-sim: {line}");
+        },
         &mut |s| {
             if tty {
                 eprint!("\r\x1b[2K{}", status_line(s));
@@ -309,59 +360,86 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
                 eprintln!("{}", status_line(s));
             }
         },
-    );
+    )?;
     if tty {
         eprintln!();
     }
-    // Whatever happened, the controller is asked to finish and its trace collected.
-    let trace = controller.as_mut().and_then(|c| {
-        let status = c.finish(Duration::from_secs(5));
-        eprintln!("ugv-sim: controller finished: {status:?}");
-        std::fs::read_to_string(&c.trace)
-            .ok()
-            .and_then(|t| serde_json::from_str::<ugv_controller::trace::Trace>(&t).ok())
-    });
-    let outcome = outcome?;
-    let (lines, last) = wires.gps_input();
-    if lines > 0 {
-        eprintln!("ugv-sim: the controller wrote {lines} lines to the GPS port (last: {last:?})");
-    }
-    let verdict = Verdict::judge("hil", &sc, sim.report(outcome.clone()), trace.as_ref());
-    write_results(
-        &args.results,
-        &sc,
-        &verdict,
-        &sim.trajectory,
-        trace.as_ref(),
-        cfg.perception.detection_radius,
-    )?;
     println!("{}", serde_json::to_string_pretty(&verdict)?);
     Ok(ExitCode::from(exit_code(&outcome)))
 }
 
-fn run_suite(
-    dir: &std::path::Path,
-    results: &std::path::Path,
-    jobs: Option<usize>,
-    follower: FollowerKind,
-    anfis_model: Option<PathBuf>,
-) -> Result<ExitCode> {
+fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
     use ugv_sim::suite;
-    let files = suite::scenario_files(dir).with_context(|| format!("reading {}", dir.display()))?;
+    let SuiteArgs {
+        dir,
+        results,
+        jobs,
+        follower,
+        anfis_model,
+        hil,
+        controller,
+        cans,
+    } = args;
+    let files =
+        suite::scenario_files(&dir).with_context(|| format!("reading {}", dir.display()))?;
     anyhow::ensure!(
         !files.is_empty(),
         "no scenario files (*.toml) in {}",
         dir.display()
     );
-    let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    anyhow::ensure!(
+        hil || (controller.is_none() && cans.is_empty()),
+        "--controller and --can are for --hil runs"
+    );
     let total = files.len();
     let tune = move |sc: &Scenario| {
         let mut cfg = controller_config(sc, follower);
         cfg.follower.anfis_model = anfis_model.clone();
         cfg
     };
+    let sil = suite::sil_runner(&tune);
+    let stop = stop_on_signal()?;
+    let controller = match controller {
+        Some(c) => c,
+        None => std::env::current_exe()?.with_file_name("ugv-controller"),
+    };
+    let hil_runner = |file: &std::path::Path, sc: &Scenario, slot: usize| {
+        let mut sc = sc.clone();
+        if let Some(can) = cans.get(slot) {
+            sc.can.interface = can.clone();
+        }
+        let stem = file
+            .file_stem()
+            .map_or_else(|| sc.name.clone(), |s| s.to_string_lossy().into_owned());
+        let options = HilOptions {
+            controller: Some(controller.clone()),
+            controller_args: Vec::new(),
+            wait_for_controller: false,
+            gps_link: None,
+            run_id: format!("suite-{stem}-{}", std::process::id()),
+            results: results.join(&stem),
+            status_every: 1.0,
+        };
+        std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
+        hil::run_scenario(&sc, &tune(&sc), &options, &stop, &mut |_| {}, &mut |_| {})
+            .map(|(verdict, _)| verdict)
+            .map_err(|e| e.to_string())
+    };
+    let (runner, jobs): (&suite::Runner<'_>, usize) = if hil {
+        anyhow::ensure!(
+            controller.is_file(),
+            "{} is not a file (--controller)",
+            controller.display()
+        );
+        (&hil_runner, cans.len().max(1))
+    } else {
+        (
+            &sil,
+            jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        )
+    };
     let started = std::time::Instant::now();
-    let entries = suite::run_suite(&files, jobs, &tune, &|done, e| {
+    let entries = suite::run_suite_with(&files, jobs, runner, &|done, e| {
         let width = 30;
         let filled = done * width / total;
         eprintln!(
@@ -377,7 +455,7 @@ fn run_suite(
         .iter()
         .filter_map(|e| e.verdict.as_ref().map(|v| v.time()))
         .sum();
-    std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
+    std::fs::create_dir_all(&results).with_context(|| format!("creating {}", results.display()))?;
     let md = suite::markdown(&entries);
     std::fs::write(results.join("summary.md"), &md)?;
     std::fs::write(

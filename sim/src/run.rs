@@ -3,13 +3,15 @@
 //! SIL), and the verdict's bookkeeping.
 
 use embedded_can::nb::Can;
-use firmware_bridge::{BridgeError, CanPort, Received};
+use firmware_bridge::{BridgeError, CanPort};
 use golf_car_can::E2eStats;
 use serde::Serialize;
 
 use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
 use crate::devices::laser::{LaserDevice, LaserDeviceError};
-use crate::ecu::{Ecu, EcuKind, EcuNode};
+use crate::devices::map::EcuDevice;
+use crate::ecu::EcuKind;
+use crate::ecu::station::Station;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 use crate::world::World;
@@ -92,8 +94,11 @@ pub struct NodeStats {
     pub bus_errors: u64,
     pub sent: u64,
     /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
-    /// fault report.
+    /// fault report (the simulated ECU's; zero for a physical one).
     pub safe_state_trips: [u64; 4],
+    /// Reports received from the physical ECU (absent when the ECU is simulated).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physical_reports: Option<u64>,
 }
 
 /// What the terminal shows and the verdict is built from.
@@ -106,28 +111,6 @@ pub struct Snapshot {
     pub throttle_enabled: bool,
     pub throttle_fault: Option<crate::ecu::safety::Cause>,
     pub distance_to_goal: f64,
-}
-
-/// A simulated ECU and its connection to the bus.
-#[derive(Debug)]
-struct Station<B> {
-    node: EcuNode,
-    port: CanPort<B>,
-    sent: u64,
-    /// Wall-clock times of the node's periodic reports (HIL jitter).
-    report_times: Vec<f64>,
-}
-
-impl<B: Can> Station<B> {
-    fn stats(&self) -> NodeStats {
-        NodeStats {
-            e2e: self.port.stats(),
-            undecodable: self.port.undecodable(),
-            bus_errors: self.port.bus_errors(),
-            sent: self.sent,
-            safe_state_trips: self.node.safety_ref().trips,
-        }
-    }
 }
 
 /// The simulator's state during a run.
@@ -160,15 +143,10 @@ impl<B: Can> Sim<B> {
         let world = World::new(&scenario);
         let vehicle = VehicleState::at(&scenario.start);
         let min_clearance = world.clearances(&scenario.vehicle, &vehicle);
-        let station = |kind, port| Station {
-            node: EcuNode::new(kind, &scenario),
-            port,
-            sent: 0,
-            report_times: Vec::new(),
-        };
+        let station = |kind, device: &EcuDevice, port| Station::new(kind, device, &scenario, port);
         Sim {
-            steering: station(EcuKind::Steering, steering),
-            throttle: station(EcuKind::Throttle, throttle),
+            steering: station(EcuKind::Steering, &scenario.devices.steering, steering),
+            throttle: station(EcuKind::Throttle, &scenario.devices.throttle, throttle),
             dt: 1.0 / scenario.sim.physics_hz,
             tick: 0,
             world,
@@ -214,25 +192,6 @@ impl<B: Can> Sim<B> {
         self.tick.saturating_sub(1) as f64 * self.dt
     }
 
-    fn drain(station: &mut Station<B>, now: f64) {
-        while let Some(r) = station.port.try_recv() {
-            if let Received::Message(m) = r {
-                station.node.handle(now, &m);
-            }
-        }
-    }
-
-    fn send_due(station: &mut Station<B>, now: f64, wall: f64) -> Result<(), BridgeError> {
-        for m in station.node.due(now) {
-            if !matches!(m, golf_car_can::GolfCarMessage::FaultReport(_)) {
-                station.report_times.push(wall);
-            }
-            station.port.send_message(&m)?;
-            station.sent += 1;
-        }
-        Ok(())
-    }
-
     /// One fixed step at `k * dt`: frames in, actuators, vehicle, world, verdict, frames
     /// out. `wall` is the wall-clock time of the tick (equal to sim time in lockstep),
     /// `late` how late the tick came. Returns the outcome when the run is over.
@@ -240,27 +199,21 @@ impl<B: Can> Sim<B> {
         let now = self.tick as f64 * self.dt;
         self.tick += 1;
         self.lateness.push(late);
-        Self::drain(&mut self.steering, now);
-        Self::drain(&mut self.throttle, now);
-        self.steering.node.step(now, self.dt);
-        self.throttle.node.step(now, self.dt);
-        let (phi, steer_deg, rate) = match &self.steering.node.ecu {
-            Ecu::Steering(e) => (e.angle(), e.angle_deg(), e.rate_deg_s()),
-            Ecu::Throttle(_) => (0.0, 0.0, 0.0),
-        };
-        let v = match &self.throttle.node.ecu {
-            Ecu::Throttle(e) => e.speed(),
-            Ecu::Steering(_) => 0.0,
-        };
-        self.max_steer_deg = self.max_steer_deg.max(steer_deg.abs());
+        self.steering.drain(now);
+        self.throttle.drain(now);
+        self.steering.step(now, self.dt);
+        self.throttle.step(now, self.dt);
+        let (phi, rate) = self.steering.actuator();
+        let (v, _) = self.throttle.actuator();
+        self.max_steer_deg = self.max_steer_deg.max(phi.to_degrees().abs());
         self.max_steer_rate_deg_s = self.max_steer_rate_deg_s.max(rate.abs());
         if now > 0.0 {
             self.vehicle
                 .step(self.scenario.vehicle.wheelbase, v, phi, self.dt);
             self.world.set_time(now);
         }
-        Self::send_due(&mut self.steering, now, wall)?;
-        Self::send_due(&mut self.throttle, now, wall)?;
+        self.steering.send_due(now, wall)?;
+        self.throttle.send_due(now, wall)?;
         if let Some(gps) = &mut self.gps {
             self.outputs.gps = gps.poll(now, &self.vehicle)?;
         }
@@ -312,10 +265,10 @@ impl<B: Can> Sim<B> {
         Snapshot {
             time: self.time(),
             vehicle: self.vehicle,
-            steering_enabled: self.steering.node.safety_ref().enabled(),
-            steering_fault: self.steering.node.safety_ref().fault(),
-            throttle_enabled: self.throttle.node.safety_ref().enabled(),
-            throttle_fault: self.throttle.node.safety_ref().fault(),
+            steering_enabled: self.steering.state().0,
+            steering_fault: self.steering.state().1,
+            throttle_enabled: self.throttle.state().0,
+            throttle_fault: self.throttle.state().1,
             distance_to_goal: self.distance_to_goal(),
         }
     }
@@ -328,7 +281,7 @@ impl<B: Can> Sim<B> {
     /// Jitter of the report periods (deviation of each interval from the DBC period).
     pub fn report_jitter(&self) -> Jitter {
         let period = crate::ecu::period_of::<golf_car_can::SteeringReport>();
-        let deviations = [&self.steering.report_times, &self.throttle.report_times]
+        let deviations = [self.steering.report_times(), self.throttle.report_times()]
             .iter()
             .flat_map(|t| t.windows(2).map(|w| (w[1] - w[0] - period).abs()))
             .collect();

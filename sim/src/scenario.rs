@@ -296,6 +296,8 @@ pub struct Scenario {
     pub laser: crate::devices::laser::LaserConfig,
     pub sim: SimConfig,
     pub success: SuccessCriteria,
+    /// Which devices are simulated and which physical (all simulated by default).
+    pub devices: crate::devices::map::DeviceMap,
 }
 
 impl Default for Scenario {
@@ -324,6 +326,7 @@ impl Default for Scenario {
             laser: Default::default(),
             sim: SimConfig::default(),
             success: SuccessCriteria::default(),
+            devices: Default::default(),
         }
     }
 }
@@ -578,6 +581,9 @@ impl Scenario {
         self.laser
             .validate()
             .map_err(|e| bad(&[Key("laser"), Key(e.field)], e.message))?;
+        self.devices
+            .validate(&self.can.interface)
+            .map_err(|e| bad(&[Key("devices"), Key(e.path[0]), Key(e.path[1])], e.message))?;
         let sim = &self.sim;
         if !(sim.physics_hz.is_finite() && (10.0..=2000.0).contains(&sim.physics_hz)) {
             return Err(bad(
@@ -659,6 +665,21 @@ impl Scenario {
             }
         }
         Ok(())
+    }
+}
+
+/// The error of a device map read from its own bench file `file` (text `text`).
+pub(crate) fn invalid_device(
+    text: &str,
+    file: &str,
+    e: &crate::devices::map::DeviceError,
+) -> ScenarioError {
+    let path = [Key("devices"), Key(e.path[0]), Key(e.path[1])];
+    ScenarioError::Invalid {
+        file: file.to_owned(),
+        line: locate(text, &path),
+        field: path_text(&path),
+        message: e.message.clone(),
     }
 }
 

@@ -22,6 +22,10 @@ pub enum SilError {
     Controller(#[from] ControllerError),
     #[error("controller CAN: {0}")]
     Bus(#[from] BridgeError),
+    #[error(
+        "SIL plays every device in-process, but the device map puts {0} outside (run it in HIL, without --sil)"
+    )]
+    PhysicalDevice(String),
 }
 
 /// A finished SIL run.
@@ -34,6 +38,9 @@ pub struct SilRun {
 
 /// Run `scenario` with the controller configured by `cfg`, in lockstep.
 pub fn run_sil(scenario: Scenario, cfg: &ControllerConfig) -> Result<SilRun, SilError> {
+    if !scenario.devices.all_simulated() {
+        return Err(SilError::PhysicalDevice(format!("{:?}", scenario.devices)));
+    }
     let bus = MemBus::new();
     let mut sim = Sim::new(
         scenario.clone(),

@@ -1,5 +1,6 @@
-//! A scenario suite: every scenario file of a folder run in SIL, in parallel, judged
-//! by its own success criteria, summarised as Markdown, JSON and JUnit XML (for CI).
+//! A scenario suite: every scenario file of a folder run in SIL (or HIL, one run per
+//! CAN interface at a time), in parallel, judged by its own success criteria,
+//! summarised as Markdown, JSON and JUnit XML (for CI).
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -43,23 +44,17 @@ pub fn scenario_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-fn run_one(file: &Path, tune: &dyn Fn(&Scenario) -> ControllerConfig) -> SuiteEntry {
+/// Runs one scenario on worker `slot` (0..jobs) and judges it.
+pub type Runner<'a> = dyn Fn(&Path, &Scenario, usize) -> Result<Verdict, String> + Sync + 'a;
+
+fn run_one(file: &Path, slot: usize, runner: &Runner<'_>) -> SuiteEntry {
     let started = Instant::now();
     let name = file
         .file_stem()
         .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
     let result = Scenario::load(file)
         .map_err(|e| e.to_string())
-        .and_then(|sc| {
-            let cfg = tune(&sc);
-            let run = run_sil(sc.clone(), &cfg).map_err(|e| e.to_string())?;
-            Ok(Verdict::judge(
-                "sil",
-                &sc,
-                run.sim.report(run.outcome),
-                Some(&run.trace),
-            ))
-        });
+        .and_then(|sc| runner(file, &sc, slot));
     let (verdict, error) = match result {
         Ok(v) => (Some(v), None),
         Err(e) => (None, Some(e)),
@@ -73,6 +68,22 @@ fn run_one(file: &Path, tune: &dyn Fn(&Scenario) -> ControllerConfig) -> SuiteEn
     }
 }
 
+/// The SIL runner: the controller library in lockstep, configured by `tune`.
+pub fn sil_runner<'a>(
+    tune: &'a (dyn Fn(&Scenario) -> ControllerConfig + Sync),
+) -> impl Fn(&Path, &Scenario, usize) -> Result<Verdict, String> + Sync + 'a {
+    move |_, sc, _| {
+        let cfg = tune(sc);
+        let run = run_sil(sc.clone(), &cfg).map_err(|e| e.to_string())?;
+        Ok(Verdict::judge(
+            "sil",
+            sc,
+            run.sim.report(run.outcome),
+            Some(&run.trace),
+        ))
+    }
+}
+
 /// Run every file in SIL on `jobs` threads; `progress` sees each entry as it finishes
 /// (with the count done so far). `tune` makes the controller configuration.
 pub fn run_suite(
@@ -81,16 +92,28 @@ pub fn run_suite(
     tune: &(dyn Fn(&Scenario) -> ControllerConfig + Sync),
     progress: &(dyn Fn(usize, &SuiteEntry) + Sync),
 ) -> Vec<SuiteEntry> {
+    run_suite_with(files, jobs, &sil_runner(tune), progress)
+}
+
+/// Run every file with `runner` on `jobs` worker threads (worker `j` passes slot `j`,
+/// so a HIL runner can give each worker a CAN interface of its own).
+pub fn run_suite_with(
+    files: &[PathBuf],
+    jobs: usize,
+    runner: &Runner<'_>,
+    progress: &(dyn Fn(usize, &SuiteEntry) + Sync),
+) -> Vec<SuiteEntry> {
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<SuiteEntry>>> = Mutex::new(vec![None; files.len()]);
     std::thread::scope(|scope| {
-        for _ in 0..jobs.clamp(1, files.len().max(1)) {
-            scope.spawn(|| {
+        for slot in 0..jobs.clamp(1, files.len().max(1)) {
+            let (next, done, results) = (&next, &done, &results);
+            scope.spawn(move || {
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(file) = files.get(i) else { break };
-                    let entry = run_one(file, tune);
+                    let entry = run_one(file, slot, runner);
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1, &entry);
                     if let Ok(mut r) = results.lock() {
                         r[i] = Some(entry);
@@ -126,8 +149,12 @@ fn outcome_text(e: &SuiteEntry) -> String {
 /// A Markdown table of the suite.
 pub fn markdown(entries: &[SuiteEntry]) -> String {
     let passed = entries.iter().filter(|e| e.passed()).count();
+    let mode = entries
+        .iter()
+        .find_map(|e| e.verdict.as_ref().map(|v| v.mode.to_uppercase()))
+        .unwrap_or_else(|| "SIL".to_owned());
     let mut out = format!(
-        "# Scenario suite (SIL)\n\n{passed} of {} passed.\n\n| scenario | result | time s | path m | min clearance m | max steer ° | tracking RMS m |\n|---|---|---|---|---|---|---|\n",
+        "# Scenario suite ({mode})\n\n{passed} of {} passed.\n\n| scenario | result | time s | path m | min clearance m | max steer ° | tracking RMS m |\n|---|---|---|---|---|---|---|\n",
         entries.len()
     );
     for e in entries {
@@ -174,7 +201,8 @@ pub fn junit(entries: &[SuiteEntry]) -> String {
     );
     for e in entries {
         out.push_str(&format!(
-            "  <testcase classname=\"ugv-sim.sil\" name=\"{}\" time=\"{:.3}\">",
+            "  <testcase classname=\"ugv-sim.{}\" name=\"{}\" time=\"{:.3}\">",
+            e.verdict.as_ref().map_or("sil", |v| v.mode.as_str()),
             xml_escape(&e.name),
             e.wall_s
         ));

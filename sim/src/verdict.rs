@@ -40,6 +40,12 @@ pub struct Verdict {
     #[serde(flatten)]
     pub report: RunReport,
     pub controller: Option<ControllerSummary>,
+    /// HIL: from a GPS fix to the controller's first steering command with it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fix_latency: Option<crate::hil::FixLatency>,
+    /// HIL: the gateways to physical buses and the laser driver, when in use.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wires: Option<crate::hil::WireStats>,
 }
 
 /// RMS of the commanded steering rate over the control samples, deg/s.
@@ -121,6 +127,8 @@ impl Verdict {
             collision,
             report,
             controller,
+            fix_latency: None,
+            wires: None,
         }
     }
 }

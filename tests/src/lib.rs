@@ -68,3 +68,84 @@ pub fn workspace_bin(name: &str) -> anyhow::Result<PathBuf> {
     );
     Ok(bin)
 }
+
+/// A software null-modem cable: two pseudo-terminals whose masters are joined, so a
+/// program that opens `a` (say, the simulator writing its NMEA to a "physical" serial
+/// device) talks to one that opens `b` (the controller), both through real tty
+/// devices, as over a USB-serial adapter and its cable. The relay stops on drop.
+#[derive(Debug)]
+pub struct NullModem {
+    pub a: PathBuf,
+    pub b: PathBuf,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    relay: Option<std::thread::JoinHandle<()>>,
+}
+
+impl NullModem {
+    pub fn new() -> anyhow::Result<NullModem> {
+        use nix::fcntl::{FcntlArg, OFlag, fcntl};
+        use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+        use std::io::{ErrorKind, Read, Write};
+        use std::sync::atomic::Ordering;
+
+        let end = || -> anyhow::Result<(std::fs::File, std::os::fd::OwnedFd, PathBuf)> {
+            let pty = nix::pty::openpty(None, None)?;
+            let mut t = tcgetattr(&pty.slave)?;
+            cfmakeraw(&mut t);
+            tcsetattr(&pty.slave, SetArg::TCSANOW, &t)?;
+            let flags = OFlag::from_bits_truncate(fcntl(&pty.master, FcntlArg::F_GETFL)?);
+            fcntl(&pty.master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+            let path = nix::unistd::ttyname(&pty.slave)?;
+            Ok((std::fs::File::from(pty.master), pty.slave, path))
+        };
+        let (ma, slave_a, a) = end()?;
+        let (mb, slave_b, b) = end()?;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = std::sync::Arc::clone(&stop);
+        let relay = std::thread::spawn(move || {
+            // The slaves stay open here so neither side sees a hang-up between opens.
+            let _slaves = (slave_a, slave_b);
+            let mut buf = [0u8; 4096];
+            // Bytes read from one master and not yet taken by the other.
+            let mut pending: [Vec<u8>; 2] = [Vec::new(), Vec::new()];
+            while !flag.load(Ordering::Relaxed) {
+                let mut moved = false;
+                for (mut from, mut to, queue) in [(&ma, &mb, 0usize), (&mb, &ma, 1usize)] {
+                    if let Ok(n) = from.read(&mut buf) {
+                        pending[queue].extend_from_slice(&buf[..n]);
+                        moved |= n > 0;
+                    }
+                    if !pending[queue].is_empty() {
+                        match to.write(&pending[queue]) {
+                            Ok(n) => {
+                                pending[queue].drain(..n);
+                                moved |= n > 0;
+                            }
+                            Err(e) if e.kind() == ErrorKind::WouldBlock => {}
+                            // The far end is gone: what was in flight is lost, as on a cable.
+                            Err(_) => pending[queue].clear(),
+                        }
+                    }
+                }
+                if !moved {
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                }
+            }
+        });
+        Ok(NullModem {
+            a,
+            b,
+            stop,
+            relay: Some(relay),
+        })
+    }
+}
+
+impl Drop for NullModem {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(relay) = self.relay.take() {
+            let _ = relay.join();
+        }
+    }
+}

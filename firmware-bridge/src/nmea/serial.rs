@@ -203,22 +203,7 @@ impl PtyEndpoint {
     /// bytes written. Pacing at the baud rate is the caller's (see
     /// [`super::transmit_time`]): a pty enforces none.
     pub fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
-        let mut written = 0;
-        while written < bytes.len() {
-            let rest = bytes.get(written..).unwrap_or(&[]);
-            match self.master.write(rest) {
-                Ok(0) => break,
-                Ok(n) => written += n,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
-                Err(source) => {
-                    return Err(NmeaError::Io {
-                        context: format!("writing to pty {}", self.slave_path.display()),
-                        source,
-                    });
-                }
-            }
-        }
+        let written = write_what_fits(&mut self.master, bytes, &self.slave_path)?;
         self.dropped_bytes += (bytes.len() - written) as u64;
         Ok(written)
     }
@@ -231,31 +216,129 @@ impl PtyEndpoint {
     /// Whatever the controller wrote since the last call (a GGA for NTRIP, receiver
     /// configuration), split into lines; framing problems come as errors. Never blocks.
     pub fn read_input(&mut self) -> Result<Vec<Framed>, NmeaError> {
-        let mut out = Vec::new();
-        let mut buf = [0u8; 512];
-        loop {
-            match self.master.read(&mut buf) {
-                Ok(0) => break,
-                Ok(n) => self.input.push(buf.get(..n).unwrap_or(&[]), &mut out),
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
-                Err(source) => {
-                    return Err(NmeaError::Io {
-                        context: format!("reading from pty {}", self.slave_path.display()),
-                        source,
-                    });
-                }
+        read_lines(&mut self.master, &mut self.input, &self.slave_path)
+    }
+}
+
+/// Write what the line takes now (`WouldBlock` or a write timeout end it); the bytes
+/// written.
+fn write_what_fits(w: &mut impl Write, bytes: &[u8], path: &Path) -> Result<usize, NmeaError> {
+    let mut written = 0;
+    while written < bytes.len() {
+        let rest = bytes.get(written..).unwrap_or(&[]);
+        match w.write(rest) {
+            Ok(0) => break,
+            Ok(n) => written += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                break;
+            }
+            Err(source) => {
+                return Err(NmeaError::Io {
+                    context: format!("writing to {}", path.display()),
+                    source,
+                });
             }
         }
-        for f in &out {
-            match f {
-                Framed::Line(line) => {
-                    tracing::info!(line = %String::from_utf8_lossy(line), "GPS input from the controller");
-                }
-                Framed::Error(e) => tracing::info!(error = %e, "GPS input from the controller"),
+    }
+    Ok(written)
+}
+
+/// Whatever came in on the line so far, framed into lines (logged); never blocks on a
+/// non-blocking or zero-timeout port.
+fn read_lines(
+    r: &mut impl Read,
+    framer: &mut LineFramer,
+    path: &Path,
+) -> Result<Vec<Framed>, NmeaError> {
+    let mut out = Vec::new();
+    let mut buf = [0u8; 512];
+    loop {
+        match r.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => framer.push(buf.get(..n).unwrap_or(&[]), &mut out),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                break;
+            }
+            Err(source) => {
+                return Err(NmeaError::Io {
+                    context: format!("reading from {}", path.display()),
+                    source,
+                });
             }
         }
-        Ok(out)
+    }
+    for f in &out {
+        match f {
+            Framed::Line(line) => {
+                tracing::info!(line = %String::from_utf8_lossy(line), "GPS input from the controller");
+            }
+            Framed::Error(e) => tracing::info!(error = %e, "GPS input from the controller"),
+        }
+    }
+    Ok(out)
+}
+
+/// The simulated receiver's line on a physical serial device (a USB-serial adapter
+/// wired to the controller's board): opened through serialport at the baud rate, 8N1,
+/// and used without blocking, like [`PtyEndpoint`]: what the UART buffer does not take
+/// is dropped and counted.
+pub struct SerialEndpoint {
+    port: Box<dyn SerialPort>,
+    path: PathBuf,
+    input: LineFramer,
+    dropped_bytes: u64,
+}
+
+impl std::fmt::Debug for SerialEndpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SerialEndpoint")
+            .field("path", &self.path)
+            .field("dropped_bytes", &self.dropped_bytes)
+            .finish_non_exhaustive()
+    }
+}
+
+impl SerialEndpoint {
+    /// Open `path` at `baud`.
+    pub fn open(path: &Path, baud: u32) -> Result<Self, NmeaError> {
+        Ok(SerialEndpoint {
+            port: open_serial(path, baud, Duration::ZERO)?,
+            path: path.to_owned(),
+            input: LineFramer::default(),
+            dropped_bytes: 0,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Write what the device takes now; the rest is dropped and counted.
+    pub fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
+        let written = write_what_fits(&mut self.port, bytes, &self.path)?;
+        self.dropped_bytes += (bytes.len() - written) as u64;
+        Ok(written)
+    }
+
+    pub fn dropped_bytes(&self) -> u64 {
+        self.dropped_bytes
+    }
+
+    /// What the controller wrote back, in lines. Never blocks.
+    pub fn read_input(&mut self) -> Result<Vec<Framed>, NmeaError> {
+        read_lines(&mut self.port, &mut self.input, &self.path)
     }
 }
 

@@ -3,6 +3,7 @@
 //! same node runs on a SocketCAN interface (HIL) or in lockstep (SIL).
 
 pub mod safety;
+pub mod station;
 pub mod steering;
 pub mod throttle;
 

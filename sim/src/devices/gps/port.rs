@@ -1,11 +1,11 @@
-//! The GPS's serial port in HIL: a pseudo-terminal at a user-named link path, fed at
-//! the configured baud rate by a [`Pacer`], and a log of what the controller writes
-//! back.
+//! The GPS's serial port in HIL: a pseudo-terminal at a user-named link path, or a
+//! physical serial device, fed at the configured baud rate by a [`Pacer`], and a log
+//! of what the controller writes back.
 
 use std::collections::VecDeque;
 use std::path::Path;
 
-use firmware_bridge::nmea::{Framed, PtyEndpoint};
+use firmware_bridge::nmea::{Framed, NmeaError, PtyEndpoint, SerialEndpoint};
 
 use super::pacer::Pacer;
 use super::{GpsDevice, GpsEpoch, GpsError};
@@ -87,34 +87,77 @@ impl InputLog {
 /// 200 Hz a byte is at most 5 ms late and the line never runs faster than the baud.
 #[derive(Debug)]
 pub struct GpsPort {
-    pty: PtyEndpoint,
+    line: Line,
     pacer: Pacer,
     input: InputLog,
     out: Vec<u8>,
     written: u64,
 }
 
+/// The receiver's end of the line.
+#[derive(Debug)]
+enum Line {
+    Pty(PtyEndpoint),
+    Serial(SerialEndpoint),
+}
+
+impl Line {
+    fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
+        match self {
+            Line::Pty(p) => p.send(bytes),
+            Line::Serial(s) => s.send(bytes),
+        }
+    }
+
+    fn read_input(&mut self) -> Result<Vec<Framed>, NmeaError> {
+        match self {
+            Line::Pty(p) => p.read_input(),
+            Line::Serial(s) => s.read_input(),
+        }
+    }
+}
+
 impl GpsPort {
-    /// A pty, with a symlink at `link` if given (a stale symlink there is replaced,
-    /// anything else refused), paced at `baud`.
-    pub fn open(link: Option<&Path>, baud: u32) -> Result<GpsPort, GpsError> {
-        Ok(GpsPort {
-            pty: PtyEndpoint::open(link)?,
+    fn on(line: Line, baud: u32) -> GpsPort {
+        GpsPort {
+            line,
             pacer: Pacer::new(baud),
             input: InputLog::new(INPUT_LOG_LINES),
             out: Vec::new(),
             written: 0,
-        })
+        }
     }
 
-    /// The path the controller opens (the symlink, else the pty slave).
+    /// A pty, with a symlink at `link` if given (a stale symlink there is replaced,
+    /// anything else refused), paced at `baud`.
+    pub fn open(link: Option<&Path>, baud: u32) -> Result<GpsPort, GpsError> {
+        Ok(GpsPort::on(Line::Pty(PtyEndpoint::open(link)?), baud))
+    }
+
+    /// A physical serial device (a USB-serial adapter wired to the controller's
+    /// board) set to `baud` and paced at it.
+    pub fn serial(device: &Path, baud: u32) -> Result<GpsPort, GpsError> {
+        Ok(GpsPort::on(
+            Line::Serial(SerialEndpoint::open(device, baud)?),
+            baud,
+        ))
+    }
+
+    /// The path the controller opens: the pty's symlink, else its slave; or the
+    /// serial device.
     pub fn path(&self) -> &Path {
-        self.pty.path()
+        match &self.line {
+            Line::Pty(p) => p.path(),
+            Line::Serial(s) => s.path(),
+        }
     }
 
-    /// The pty slave device (/dev/pts/N).
+    /// The pty slave device (/dev/pts/N), or the serial device.
     pub fn slave_path(&self) -> &Path {
-        self.pty.slave_path()
+        match &self.line {
+            Line::Pty(p) => p.slave_path(),
+            Line::Serial(s) => s.path(),
+        }
     }
 
     /// Queue an epoch's sentences to go out from its epoch time on.
@@ -130,11 +173,11 @@ impl GpsPort {
         let n = if self.out.is_empty() {
             0
         } else {
-            // What does not fit (nobody reading) is dropped and counted by the pty.
-            self.pty.send(&self.out)?
+            // What does not fit (nobody reading) is dropped and counted by the line.
+            self.line.send(&self.out)?
         };
         self.written += n as u64;
-        for f in self.pty.read_input()? {
+        for f in self.line.read_input()? {
             self.input.push(f);
         }
         Ok(n)
@@ -165,13 +208,16 @@ impl GpsPort {
         &self.pacer
     }
 
-    /// Bytes written to the pty.
+    /// Bytes written to the line.
     pub fn written(&self) -> u64 {
         self.written
     }
 
-    /// Bytes lost because the pty was full (nobody reading).
+    /// Bytes lost because the line was full (nobody reading).
     pub fn dropped_bytes(&self) -> u64 {
-        self.pty.dropped_bytes()
+        match &self.line {
+            Line::Pty(p) => p.dropped_bytes(),
+            Line::Serial(s) => s.dropped_bytes(),
+        }
     }
 }

@@ -1,0 +1,215 @@
+//! An actuator ECU's place on the simulator's bus: the simulator's own ECU node, or
+//! a physical ECU whose reports move the simulated vehicle; and the standalone ECU, a
+//! simulated ECU alone on any interface as a stand-in for the hardware on a bench.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use embedded_can::nb::Can;
+use firmware_bridge::clock::Clock;
+use firmware_bridge::{BridgeError, CanPort, Received};
+use golf_car_can::GolfCarMessage;
+
+use super::{Ecu, EcuKind, EcuNode};
+use crate::devices::map::EcuDevice;
+use crate::run::NodeStats;
+use crate::scenario::Scenario;
+
+/// What plays an actuator ECU in the run.
+#[derive(Debug)]
+enum Twin {
+    /// The simulator's own ECU.
+    Simulated(EcuNode),
+    /// A physical ECU (on a physical bus behind the gateway): the simulated twin stays
+    /// silent and the vehicle follows the physical ECU's reports.
+    Physical(Reported),
+}
+
+/// The last report of a physical ECU.
+#[derive(Debug, Default)]
+struct Reported {
+    reports: u64,
+    enabled: bool,
+    /// Road-wheel angle (rad) or wheel speed (m/s).
+    value: f64,
+    /// Steering rate, deg/s.
+    rate_deg_s: f64,
+}
+
+impl Reported {
+    fn handle(&mut self, kind: EcuKind, message: &GolfCarMessage) {
+        use GolfCarMessage as M;
+        match (kind, message) {
+            (EcuKind::Steering, M::SteeringReport(r)) => {
+                self.enabled = r.enabled;
+                self.value = r.angle.to_radians();
+                self.rate_deg_s = r.rate;
+            }
+            (EcuKind::Throttle, M::ThrottleReport(r)) => {
+                self.enabled = r.enabled;
+                self.value = r.wheel_speed;
+            }
+            _ => return,
+        }
+        self.reports += 1;
+    }
+}
+
+/// An actuator ECU and its connection to the simulator's bus.
+#[derive(Debug)]
+pub struct Station<B> {
+    kind: EcuKind,
+    twin: Twin,
+    port: CanPort<B>,
+    sent: u64,
+    /// Wall-clock times of the node's periodic reports (HIL jitter).
+    report_times: Vec<f64>,
+}
+
+impl<B: Can> Station<B> {
+    /// The ECU `kind` on `port`, simulated or physical as `device` says.
+    pub fn new(kind: EcuKind, device: &EcuDevice, scenario: &Scenario, port: CanPort<B>) -> Self {
+        Station {
+            kind,
+            twin: match device {
+                EcuDevice::Simulated {} => Twin::Simulated(EcuNode::new(kind, scenario)),
+                EcuDevice::Physical { .. } => Twin::Physical(Reported::default()),
+            },
+            port,
+            sent: 0,
+            report_times: Vec::new(),
+        }
+    }
+
+    /// Take every frame waiting on the bus.
+    pub fn drain(&mut self, now: f64) {
+        while let Some(r) = self.port.try_recv() {
+            if let Received::Message(m) = r {
+                match &mut self.twin {
+                    Twin::Simulated(node) => node.handle(now, &m),
+                    Twin::Physical(reported) => reported.handle(self.kind, &m),
+                }
+            }
+        }
+    }
+
+    /// Move the simulated actuator by `dt` ending at `now` (a physical one moves itself).
+    pub fn step(&mut self, now: f64, dt: f64) {
+        if let Twin::Simulated(node) = &mut self.twin {
+            node.step(now, dt);
+        }
+    }
+
+    /// Send what the simulated ECU has due at `now`; `wall` is the wall-clock time.
+    pub fn send_due(&mut self, now: f64, wall: f64) -> Result<(), BridgeError> {
+        let Twin::Simulated(node) = &mut self.twin else {
+            return Ok(());
+        };
+        for m in node.due(now) {
+            if !matches!(m, GolfCarMessage::FaultReport(_)) {
+                self.report_times.push(wall);
+            }
+            self.port.send_message(&m)?;
+            self.sent += 1;
+        }
+        Ok(())
+    }
+
+    /// Wall-clock times of the periodic reports sent.
+    pub fn report_times(&self) -> &[f64] {
+        &self.report_times
+    }
+
+    /// The node's CAN statistics.
+    pub fn stats(&self) -> NodeStats {
+        NodeStats {
+            e2e: self.port.stats(),
+            undecodable: self.port.undecodable(),
+            bus_errors: self.port.bus_errors(),
+            sent: self.sent,
+            safe_state_trips: match &self.twin {
+                Twin::Simulated(node) => node.safety_ref().trips,
+                Twin::Physical(_) => [0; 4],
+            },
+            physical_reports: match &self.twin {
+                Twin::Simulated(_) => None,
+                Twin::Physical(r) => Some(r.reports),
+            },
+        }
+    }
+
+    /// Enabled, and the fault the simulated ECU is in (a physical one's is in its report).
+    pub fn state(&self) -> (bool, Option<crate::ecu::safety::Cause>) {
+        match &self.twin {
+            Twin::Simulated(node) => (node.safety_ref().enabled(), node.safety_ref().fault()),
+            Twin::Physical(r) => (r.enabled, None),
+        }
+    }
+
+    /// The actuator's position: road-wheel angle (rad) and rate (deg/s), or wheel
+    /// speed (m/s) and 0.
+    pub fn actuator(&self) -> (f64, f64) {
+        match &self.twin {
+            Twin::Simulated(node) => match &node.ecu {
+                Ecu::Steering(e) => (e.angle(), e.rate_deg_s()),
+                Ecu::Throttle(e) => (e.speed(), 0.0),
+            },
+            Twin::Physical(r) => (r.value, r.rate_deg_s),
+        }
+    }
+}
+
+/// A standalone ECU's state for status lines.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StandaloneStatus {
+    pub time: f64,
+    pub enabled: bool,
+    pub fault: Option<super::safety::Cause>,
+    /// Road-wheel angle (deg) or wheel speed (m/s).
+    pub value: f64,
+    pub stats: NodeStats,
+}
+
+/// Run the simulated ECU `kind` alone on `port` (a stand-in for the hardware: it
+/// answers commands, watches the heartbeat and reports, as in a run) on `clock`,
+/// at the scenario's physics rate, until `stop`. `status` is called every
+/// `status_every` seconds. Returns the final status.
+pub fn run_standalone<B: Can>(
+    kind: EcuKind,
+    scenario: &Scenario,
+    port: CanPort<B>,
+    clock: &mut dyn Clock,
+    stop: &AtomicBool,
+    status_every: f64,
+    status: &mut dyn FnMut(&StandaloneStatus),
+) -> Result<StandaloneStatus, BridgeError> {
+    let mut station = Station::new(kind, &EcuDevice::Simulated {}, scenario, port);
+    let dt = 1.0 / scenario.sim.physics_hz;
+    let every = ((status_every / dt).round() as u64).max(1);
+    let snapshot = |station: &Station<B>, now: f64| {
+        let (enabled, fault) = station.state();
+        let (value, _) = station.actuator();
+        StandaloneStatus {
+            time: now,
+            enabled,
+            fault,
+            value: match kind {
+                EcuKind::Steering => value.to_degrees(),
+                EcuKind::Throttle => value,
+            },
+            stats: station.stats(),
+        }
+    };
+    let mut k = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        clock.wait_tick(k);
+        let now = k as f64 * dt;
+        station.drain(now);
+        station.step(now, dt);
+        station.send_due(now, clock.now())?;
+        if k % every == 0 {
+            status(&snapshot(&station, now));
+        }
+        k += 1;
+    }
+    Ok(snapshot(&station, k.saturating_sub(1) as f64 * dt))
+}
