@@ -2,6 +2,33 @@
 //! points from the mission's start to its goal, within the steering limit, and
 //! following the planned path with the paper's optimal law (feed-forward steering of
 //! the path plus feedback on the lateral and heading errors) or an ANFIS model.
+//!
+//! # Beyond the paper
+//!
+//! - Steering limit: among the feasible a6 the cheapest path within 85 % of the
+//!   actuator's limit is taken (the method has no steering constraint).
+//! - Margins: the vehicle radius grows by a safety margin; a static obstacle the car
+//!   already stands within the margin of is planned as just clear of the car, so the
+//!   new path leads away from it instead of every a6 being forbidden.
+//! - Moving obstacles (the paper's planner is for static ones in practice: its time
+//!   law is fixed by t_f, so it can only swerve, and it swerved ahead of a crossing
+//!   obstacle in its direction of travel, into it). With a tracked obstacle moving,
+//!   the pace is a second free parameter: t_f = t_k + (x_f - x_k) / pace for each of
+//!   [`crate::config::PlannerConfig::pace_fractions`] of the cruise speed. Each pace is
+//!   planned in space-time (the Qu et al. constraint with the obstacle's
+//!   constant-velocity prediction at the instant the car is at each x), with every
+//!   moving obstacle swept along its velocity over +- a time margin (its timing and
+//!   the car's are uncertain) plus the slip of the car's schedule while it changes
+//!   speed to that pace ([`sweep`], [`Pacing::schedule_slip`]). The feasible pace with
+//!   the least deviation from the line plus a weighted time loss wins
+//!   ([`Pacing::score`]): yielding by slowing down beats a wide swerve at full speed,
+//!   and with no feasible pace the car stops. The follower then drives the plan's pace
+//!   (x advancing at w1), so the car is where the plan assumed; the next replanning
+//!   (T_s later) speeds up again once the obstacle has passed.
+//! - Headings the polynomial cannot start from: beyond `align_enter_deg` from the
+//!   line, the car first turns towards the goal on the planned steering limit at low
+//!   speed, when the whole turning circle is clear ([`Align`]), until within
+//!   `align_exit_deg`.
 
 use crate::anfis::AnfisModel;
 use crate::config::{ControllerConfig, FollowerKind};

@@ -58,6 +58,12 @@ fn a_run_is_deterministic_for_a_seed() {
     other.sim.seed = 7;
     let c = serde_json::to_string(&verdict(&other).0).expect("json");
     assert_ne!(a, c, "another seed gives other noise");
+    // Also with a moving obstacle (pace search, swept obstacles).
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite");
+    let moving = Scenario::load(&dir.join("16-crossing-yield.toml")).expect("scenario");
+    let d = serde_json::to_string(&verdict(&moving).0).expect("json");
+    let e = serde_json::to_string(&verdict(&moving).0).expect("json");
+    assert_eq!(d, e, "moving obstacles: byte-identical for a seed");
 }
 
 #[test]
