@@ -203,7 +203,9 @@ pub struct DirectionStats {
     pub kernel_timestamps: u64,
     /// Latency from the kernel's receive timestamp (wall clock, SO_TIMESTAMPNS; the
     /// monotonic read time when the kernel gave none) to the end of the transmit call:
-    /// time queued in the gateway's socket plus its handling.
+    /// time queued in the gateway's socket plus its handling. The transmit call
+    /// includes the kernel's delivery to local sockets, so a receiver on the same host
+    /// may already hold the frame when it returns.
     pub latency: LatencySummary,
     /// Latency from the gateway's read returning to the end of the transmit call
     /// (monotonic clock): the gateway's own handling, retries included.
