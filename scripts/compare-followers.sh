@@ -10,6 +10,8 @@
 # in docs/comparison/ (matplotlib). Uses $CARGO_TARGET_DIR when set.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# The report's figures need matplotlib (not needed by the tests, so installed here).
+python3 -c 'import matplotlib' 2>/dev/null || python3 -m pip install --quiet 'matplotlib==3.11.2'
 cargo build --release --locked -p ugv-sim -p ugv-controller --bins
 bin="${CARGO_TARGET_DIR:-target}/release"
 out=results/comparison

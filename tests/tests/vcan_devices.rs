@@ -88,9 +88,10 @@ fn passes(mut cmd: Command) -> Result<Value> {
         .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
     ensure!(
         out.status.code() == Some(0) && verdict["passed"] == true,
-        "ugv-sim exit {:?}, failures {}; stderr:\n{stderr}",
+        "ugv-sim exit {:?}, failures {}; verdict:\n{}\nstderr:\n{stderr}",
         out.status,
-        verdict["failures"]
+        verdict["failures"],
+        serde_json::to_string_pretty(&verdict)?
     );
     ensure!(verdict["goal_reached"] == true && verdict["collision"] == false);
     for node in ["steering_can", "throttle_can"] {
@@ -253,9 +254,10 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
         .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
     ensure!(
         out.status.code() == Some(0) && verdict["passed"] == true,
-        "ugv-sim exit {:?}, failures {}; stderr:\n{stderr}",
+        "ugv-sim exit {:?}, failures {}; verdict:\n{}\nstderr:\n{stderr}",
         out.status,
-        verdict["failures"]
+        verdict["failures"],
+        serde_json::to_string_pretty(&verdict)?
     );
     ensure!(
         forwarded(&verdict, "to_sim") > 1000 && forwarded(&verdict, "to_physical") > 1000,

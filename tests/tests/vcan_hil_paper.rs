@@ -81,6 +81,14 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
             < 0.3,
         "{controller}"
     );
+    // The loop's latency was measured: every fix the controller read was answered by a
+    // steering command, after the moment the simulator made it.
+    let latency = &verdict["fix_latency"];
+    let samples = latency["fix_to_command"]["samples"].as_u64().unwrap_or(0);
+    ensure!(samples > 100, "{latency}");
+    let p50 = latency["fix_to_command"]["p50_ms"].as_f64().unwrap_or(-1.0);
+    let read = latency["fix_to_read"]["p50_ms"].as_f64().unwrap_or(-1.0);
+    ensure!(p50 > 0.0 && read > 0.0 && p50 >= read, "{latency}");
     for file in [
         "verdict.json",
         "trace.json",
