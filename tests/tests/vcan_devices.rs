@@ -82,7 +82,11 @@ fn standalone_ecu(kind: &str, can: &str) -> Result<Background> {
 /// Run to the end and check the verdict: goal reached, no collision, every frame the
 /// simulator's ECUs received passed E2E.
 fn passes(mut cmd: Command) -> Result<Value> {
-    let out = cmd.output().context("running ugv-sim")?;
+    passed(cmd.output().context("running ugv-sim")?)
+}
+
+/// The verdict of a finished `ugv-sim run`, checked as in [`passes`].
+fn passed(out: std::process::Output) -> Result<Value> {
     let stderr = String::from_utf8_lossy(&out.stderr);
     let verdict: Value = serde_json::from_slice(&out.stdout)
         .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
@@ -249,16 +253,7 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
     let out = sim
         .join()
         .map_err(|_| anyhow::anyhow!("ugv-sim thread"))??;
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let verdict: Value = serde_json::from_slice(&out.stdout)
-        .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
-    ensure!(
-        out.status.code() == Some(0) && verdict["passed"] == true,
-        "ugv-sim exit {:?}, failures {}; verdict:\n{}\nstderr:\n{stderr}",
-        out.status,
-        verdict["failures"],
-        serde_json::to_string_pretty(&verdict)?
-    );
+    let verdict = passed(out)?;
     ensure!(
         forwarded(&verdict, "to_sim") > 1000 && forwarded(&verdict, "to_physical") > 1000,
         "gateway: {}",
