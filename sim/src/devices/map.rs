@@ -11,7 +11,7 @@
 //! [devices]
 //! steering = { mode = "physical", can = "can0" }        # the real steering ECU on can0
 //! throttle = { mode = "simulated" }                     # the default
-//! gps = { mode = "serial", device = "/dev/ttyUSB0", baud = 115200 }
+//! gps = { mode = "serial", device = "/dev/ttyUSB0", baud = 115200, peer = "/dev/ttyUSB1" }
 //! laser = { mode = "cola", listen = "0.0.0.0:2111" }     # served as a SICK over TCP
 //! controller = { mode = "board", can = "can0" }          # the controller on its own board
 //! ```
