@@ -24,7 +24,10 @@
 //!   ([`Message`]) and SICK's `sFA` error codes ([`SopasError`]).
 //! - [`convert`]: [`ScanData`] to and from [`LaserFrame`], with the angle and range
 //!   conventions below.
-//! - [`server`]: [`ColaServer`], a scanner on TCP that serves published frames.
+//! - [`device`]: [`Device`], the scanner's behaviour as a pure state machine (user
+//!   levels, one controlling client, every command's answer), testable without TCP.
+//! - [`server`]: [`ColaServer`], a scanner on TCP that serves published frames, the
+//!   threads and sockets around a [`Device`].
 //! - [`client`]: [`ColaClient`], the driver of a scanner (physical, or a
 //!   [`ColaServer`]).
 //!
@@ -113,6 +116,7 @@
 
 pub mod client;
 pub mod convert;
+pub mod device;
 pub mod framing;
 pub mod message;
 pub mod scandata;
@@ -126,6 +130,7 @@ pub use client::{ClientConfig, ClientStats, ColaClient, DeviceIdent};
 pub use convert::{
     ConvertError, DecodeOptions, EncodeOptions, RssiChannel, frame_from_scan, scan_from_frame,
 };
+pub use device::{Answer, Device, DeviceConfig, DeviceStats, SessionId, UserLevel};
 pub use fields::{EncodeError, ParseError, ParseErrorKind};
 pub use framing::{FrameError, TelegramDecoder, frame_telegram};
 pub use message::{Message, SopasError};
@@ -183,8 +188,11 @@ pub enum ColaError {
     /// The scanner answered a request with `sFA`.
     #[error("the scanner refused {request:?}: {error}")]
     Device { request: String, error: SopasError },
-    /// The scanner refused the login (`sAN SetAccessMode 0`).
-    #[error("the scanner refused the login as user level {level}")]
+    /// The scanner refused the login (`sAN SetAccessMode 0`): a wrong password, or
+    /// (on the emulated scanner) another client in control.
+    #[error(
+        "the scanner refused the login as user level {level} (a wrong password, or another client is in control; a client that only reads needs no login)"
+    )]
     AccessDenied { level: u8 },
     /// The scanner answered something else than the request called for.
     #[error("the scanner answered {answer:?} to {request:?}")]

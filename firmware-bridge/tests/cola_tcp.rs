@@ -1,6 +1,7 @@
 //! `ColaServer` and `ColaClient` on loopback TCP: the driver receives exactly the frames
 //! published, several clients, a slow client that never reads, clients that send
-//! garbage, every command's answer, login, connection loss and reconnect.
+//! garbage, every command's answer, login and the one controlling client, connection
+//! loss and reconnect.
 //!
 //! Waits are bounded by a generous `WAIT` only so that a broken build fails instead of
 //! hanging; nothing asserts how fast anything is.
@@ -96,6 +97,32 @@ fn driver(addr: SocketAddr) -> ColaClient {
     ColaClient::connect(&addr.to_string(), config).unwrap()
 }
 
+/// A driver that only reads (no login): any number of them may connect.
+fn reader(addr: SocketAddr) -> ColaClient {
+    let config = ClientConfig {
+        connect_timeout: WAIT,
+        reply_timeout: WAIT,
+        login: false,
+        ..ClientConfig::default()
+    };
+    ColaClient::connect(&addr.to_string(), config).unwrap()
+}
+
+/// Wait until the server has `n` clients (it noticed the others leave).
+fn wait_clients(server: &ColaServer, n: usize) {
+    let deadline = std::time::Instant::now() + WAIT;
+    while server.client_count() != n {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{} clients",
+            server.client_count()
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+const LOGIN: &str = "sMN SetAccessMode 03 F4724744";
+
 /// A raw CoLa-A connection for sending anything and reading answers telegram by telegram.
 struct Raw {
     stream: TcpStream,
@@ -178,7 +205,16 @@ fn driver_receives_exactly_the_frames_published() {
 #[test]
 fn several_clients_each_receive_every_frame() {
     let server = server(ServerConfig::lms511());
-    let mut clients: Vec<ColaClient> = (0..4).map(|_| driver(server.local_addr())).collect();
+    // One logs in (the controlling client), the others only read.
+    let mut clients: Vec<ColaClient> = (0..4)
+        .map(|i| {
+            if i == 0 {
+                driver(server.local_addr())
+            } else {
+                reader(server.local_addr())
+            }
+        })
+        .collect();
     assert!(clients.iter().all(|c| c.device_ident().name == "LMS511"));
     assert_eq!(server.client_count(), 4);
     for seq in 100..120 {
@@ -306,10 +342,7 @@ fn clients_sending_garbage_get_errors_and_the_server_goes_on() {
 fn commands_are_answered_as_a_sick_scanner_does() {
     let server = server(ServerConfig::lms111());
     let mut raw = Raw::connect(server.local_addr());
-    assert_eq!(
-        raw.ask("sMN SetAccessMode 03 F4724744"),
-        "sAN SetAccessMode 1"
-    );
+    assert_eq!(raw.ask(LOGIN), "sAN SetAccessMode 1");
     assert_eq!(
         raw.ask("sMN SetAccessMode 03 12345678"),
         "sAN SetAccessMode 0"
@@ -342,6 +375,9 @@ fn commands_are_answered_as_a_sick_scanner_does() {
     let (kind, scan) = ScanData::parse(raw.answer().as_bytes()).unwrap();
     assert_eq!((kind, scan.scan_counter), (ScanKind::Streamed, 2));
 
+    // `Run` ended the login: stopping needs it again.
+    assert_eq!(raw.ask("sMN LMCstopmeas"), "sFA 1");
+    assert_eq!(raw.ask(LOGIN), "sAN SetAccessMode 1");
     assert_eq!(raw.ask("sMN LMCstopmeas"), "sAN LMCstopmeas 0");
     assert!(!server.is_measuring());
     assert_eq!(server.publish(&make_frame(3, 541)).unwrap(), 0);
@@ -356,8 +392,10 @@ fn commands_are_answered_as_a_sick_scanner_does() {
     server.publish(&make_frame(5, 541)).unwrap();
     // Not streamed any more: the next telegram is the answer to the next request.
     assert_eq!(raw.ask("sRN LMPscancfg"), "sFA 3");
-    assert_eq!(raw.ask("sWN LMDscandatacfg 01 00 1"), "sFA 3");
-    assert_eq!(raw.ask("sMN mLMPsetscancfg +5000 +1"), "sFA 2");
+    assert_eq!(raw.ask("sWN LMDscandatacfg 01 00 1"), "sWA LMDscandatacfg");
+    assert_eq!(raw.ask("sWN NoSuchVariable 1"), "sFA 3");
+    assert_eq!(raw.ask("sMN mLMPsetscancfg +5000 +1"), "sFA 4");
+    assert_eq!(raw.ask("sMN NoSuchMethod"), "sFA 2");
     assert_eq!(raw.ask("sEN LIDoutputstate 1"), "sFA F");
     assert_eq!(raw.ask("sXX Whatever"), "sFA C");
     assert_eq!(
@@ -368,19 +406,17 @@ fn commands_are_answered_as_a_sick_scanner_does() {
 }
 
 #[test]
-fn methods_need_the_login_when_the_scanner_requires_it() {
-    let server = server(ServerConfig {
-        require_login: true,
-        ..ServerConfig::lms111()
-    });
+fn methods_need_the_login_a_real_scanner_asks_for() {
+    let server = server(ServerConfig::lms111());
     let mut raw = Raw::connect(server.local_addr());
     assert_eq!(raw.ask("sMN LMCstartmeas"), "sFA 1");
     assert_eq!(raw.ask("sMN Run"), "sFA 1");
-    assert_eq!(
-        raw.ask("sMN SetAccessMode 03 F4724744"),
-        "sAN SetAccessMode 1"
-    );
+    assert_eq!(raw.ask("sWN LMDscandatacfg 01 00 1"), "sFA A");
+    assert_eq!(raw.ask("sMN mLMPsetscancfg +5000 +1"), "sFA 1");
+    assert_eq!(raw.ask(LOGIN), "sAN SetAccessMode 1");
     assert_eq!(raw.ask("sMN LMCstartmeas"), "sAN LMCstartmeas 0");
+    drop(raw);
+    wait_clients(&server, 0);
 
     let no_login = ClientConfig {
         login: false,
@@ -406,6 +442,49 @@ fn methods_need_the_login_when_the_scanner_requires_it() {
     let frame = make_frame(9, 541);
     server.publish(&frame).unwrap();
     assert_same(&client.next_frame(WAIT).unwrap().unwrap(), &frame);
+    assert_eq!(server.stats().access_denied, 5);
+}
+
+#[test]
+fn unauthenticated_stop_and_a_second_controller_are_refused_over_tcp() {
+    let server = server(ServerConfig::lms111());
+    let addr = server.local_addr();
+    // The simulator's driver (or ugv-sick) logs in and controls the scanner.
+    let mut controller = driver(addr);
+    // A client without login cannot stop the laser for everyone.
+    let mut intruder = Raw::connect(addr);
+    assert_eq!(intruder.ask("sMN LMCstopmeas"), "sFA 1");
+    assert!(server.is_measuring());
+    // Nor can it log in while the controller is connected, at any level.
+    assert_eq!(intruder.ask(LOGIN), "sAN SetAccessMode 0");
+    assert_eq!(
+        intruder.ask("sMN SetAccessMode 04 81BE23AA"),
+        "sAN SetAccessMode 0"
+    );
+    assert_eq!(intruder.ask("sMN LMCstopmeas"), "sFA 1");
+    assert!(server.is_measuring());
+    // A second driver that logs in is refused; one that only reads is served.
+    match ColaClient::connect(&addr.to_string(), ClientConfig::default()) {
+        Err(ColaError::AccessDenied { level: 3 }) => {}
+        other => panic!("{other:?}"),
+    }
+    let mut second_reader = reader(addr);
+    let frame = make_frame(21, 541);
+    assert_eq!(server.publish(&frame).unwrap(), 2);
+    assert_same(&controller.next_frame(WAIT).unwrap().unwrap(), &frame);
+    assert_same(&second_reader.next_frame(WAIT).unwrap().unwrap(), &frame);
+    let stats = server.stats();
+    assert_eq!(
+        (stats.access_denied, stats.logins_refused),
+        (2, 3),
+        "{stats:?}"
+    );
+    // When the controller leaves, another client may take control.
+    drop(controller);
+    wait_clients(&server, 2);
+    assert_eq!(intruder.ask(LOGIN), "sAN SetAccessMode 1");
+    assert_eq!(intruder.ask("sMN LMCstopmeas"), "sAN LMCstopmeas 0");
+    assert!(!server.is_measuring());
 }
 
 #[test]

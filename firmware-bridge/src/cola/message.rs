@@ -38,6 +38,8 @@ impl SopasError {
     pub const BUFFER_OVERFLOW: SopasError = SopasError(0x7);
     /// The telegram ended before its arguments.
     pub const BUFFER_UNDERFLOW: SopasError = SopasError(0x8);
+    /// Wrong user level, writing the variable not allowed (no login, or too low).
+    pub const VARIABLE_WRITE_ACCESS_DENIED: SopasError = SopasError(0xA);
     /// Unknown command type.
     pub const UNKNOWN_COLA_COMMAND: SopasError = SopasError(0xC);
     /// Unknown event.

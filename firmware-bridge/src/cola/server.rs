@@ -14,23 +14,13 @@
 //!
 //! # Device behaviour
 //!
-//! - `sEN LMDscandata 1` answers `sEA LMDscandata 1`, then every published scan
-//!   follows as `sSN LMDscandata`; `sEN LMDscandata 0` stops it.
-//! - `sRN LMDscandata` answers the latest scan as `sRA LMDscandata`, or `sFA 4`
-//!   (local condition failed) before the first one.
-//! - `sMN SetAccessMode` with the level 2, 3 or 4 password hash answers
-//!   `sAN SetAccessMode 1`, anything else `0`.
-//! - `sMN LMCstopmeas` stops measuring for every client (it is one device): published
-//!   frames are ignored until `sMN LMCstartmeas`. With
-//!   [`ServerConfig::require_login`] these and `sMN Run` need the authorized-client
-//!   login first (`sFA 1` otherwise), as on a real scanner.
-//! - `sRN DeviceIdent` and `sRN SCdevicestate` (always 1, ready) are answered.
-//! - An unknown variable (`sRN`/`sWN`) is `sFA 3`, an unknown method (`sMN`) `sFA 2`,
-//!   an unknown event (`sEN`) `sFA F`, any other command type `sFA C`; a malformed
-//!   telegram gets the code of its [`ParseError`](super::ParseError) kind
-//!   ([`SopasError::for_parse_error`]), an oversize one `sFA 7`. Bytes outside
-//!   telegrams are ignored (and counted). A client that sends
-//!   [`ServerConfig::max_consecutive_errors`] bad telegrams in a row is disconnected.
+//! What the scanner answers is [`Device`]'s, the pure state machine in
+//! [`device`](super::device): the user levels and the one controlling client, every
+//! command's answer and `sFA` code. The server gives each connection a session of its
+//! own, feeds it what the client sends, writes back the answers, turns the client's
+//! stream on and off as the device says, closes the connection when the device drops
+//! the session, and closes the session when the client goes away (which ends its
+//! login and, for the controlling client, its control).
 //!
 //! Dropping the server closes every connection and joins every thread.
 
@@ -42,11 +32,11 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::ColaError;
 use super::convert::{EncodeOptions, RssiChannel, scan_from_frame};
-use super::framing::{ETX, FrameError, STX, TelegramDecoder};
-use super::message::{Message, SopasError};
+use super::device::{Device, DeviceConfig, SessionId};
+use super::framing::{ETX, STX};
 use super::scandata::ScanKind;
-use super::{AUTHORIZED_CLIENT_PASSWORD, ColaError, MAINTENANCE_PASSWORD, SERVICE_PASSWORD};
 use crate::laser::LaserFrame;
 
 /// What the emulated scanner is and how it behaves.
@@ -65,8 +55,6 @@ pub struct ServerConfig {
     pub max_clients: usize,
     /// Longest request telegram accepted, bytes.
     pub max_telegram: usize,
-    /// Refuse `LMCstartmeas`, `LMCstopmeas` and `Run` before the authorized-client login.
-    pub require_login: bool,
     /// Bad telegrams in a row after which a client is disconnected.
     pub max_consecutive_errors: u32,
 }
@@ -87,7 +75,6 @@ impl ServerConfig {
             queue_len: 8,
             max_clients: 16,
             max_telegram: 4096,
-            require_login: false,
             max_consecutive_errors: 64,
         }
     }
@@ -110,6 +97,16 @@ impl ServerConfig {
     pub fn with_serial_number(mut self, serial: u32) -> Self {
         self.encode.serial_number = serial;
         self
+    }
+
+    /// What the [`Device`] state machine takes of it.
+    pub fn device_config(&self) -> DeviceConfig {
+        DeviceConfig {
+            device_name: self.device_name.clone(),
+            firmware_version: self.firmware_version.clone(),
+            max_telegram: self.max_telegram,
+            max_consecutive_errors: self.max_consecutive_errors,
+        }
     }
 }
 
@@ -155,21 +152,21 @@ pub struct ServerStats {
     pub bad_telegrams: u64,
     /// Bytes received outside any telegram.
     pub garbage_bytes: u64,
+    /// Requests refused for a missing or too low login (`sFA 1`, `sFA A`).
+    pub access_denied: u64,
+    /// Logins refused: a wrong level or password, or another client in control.
+    pub logins_refused: u64,
 }
 
 #[derive(Debug, Default)]
 struct Counters {
     accepted: AtomicU64,
     refused: AtomicU64,
-    dropped_for_errors: AtomicU64,
     published: AtomicU64,
     while_stopped: AtomicU64,
     queued: AtomicU64,
     sent: AtomicU64,
     dropped: AtomicU64,
-    requests: AtomicU64,
-    bad: AtomicU64,
-    garbage: AtomicU64,
     telegram_counter: AtomicU64,
 }
 
@@ -188,8 +185,8 @@ enum Out {
     Scan(Arc<Vec<u8>>),
     /// A framed answer.
     Reply(Vec<u8>),
-    /// Start or stop streaming, then acknowledge.
-    Stream(bool),
+    /// Start or stop streaming, then write the acknowledgement (framed).
+    Stream(bool, Vec<u8>),
     /// The reader is done: close.
     Close,
 }
@@ -197,6 +194,7 @@ enum Out {
 #[derive(Debug)]
 struct ClientShared {
     peer: SocketAddr,
+    session: SessionId,
     streaming: AtomicBool,
     closed: AtomicBool,
     sent: AtomicU64,
@@ -217,15 +215,14 @@ struct Shared {
     config: ServerConfig,
     start: Instant,
     shutdown: AtomicBool,
-    measuring: AtomicBool,
     counters: Counters,
-    /// The latest scan, framed as `sSN` (a poll answers it as `sRA`).
-    latest: Mutex<Option<Arc<Vec<u8>>>>,
+    /// The scanner's state: sessions, logins, measuring, the latest scan. Held only to
+    /// answer one piece of a client's stream or to swap the latest scan, never across
+    /// I/O.
+    device: Mutex<Device>,
     clients: Mutex<Vec<ClientHandle>>,
     /// Threads of clients that went away, joined later.
     retired: Mutex<Vec<JoinHandle<()>>>,
-    /// `sRA DeviceIdent ...`, framed.
-    ident_reply: Vec<u8>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -243,8 +240,11 @@ pub struct ColaServer {
 }
 
 impl ColaServer {
-    /// Listen on `address` (`0.0.0.0:2111` as a scanner; `127.0.0.1:0` for a free
-    /// port, see [`ColaServer::local_addr`]) and start serving.
+    /// Listen on `address` and start serving: `127.0.0.1:2111` as a scanner for
+    /// clients on this machine (`127.0.0.1:0` for a free port, see
+    /// [`ColaServer::local_addr`]). Listen beyond loopback (an interface's own address)
+    /// only on a network you trust: CoLa-A has no encryption, and SICK's passwords are
+    /// public.
     pub fn bind(
         address: impl ToSocketAddrs,
         config: ServerConfig,
@@ -253,11 +253,7 @@ impl ColaServer {
             .to_socket_addrs()
             .map(|mut a| a.next().map(|a| a.to_string()).unwrap_or_default())
             .unwrap_or_default();
-        let ident_reply = Message::DeviceIdent {
-            name: config.device_name.clone(),
-            version: config.firmware_version.clone(),
-        }
-        .to_telegram()?;
+        let device = Device::new(config.device_config())?;
         // Fail early on options that would fail every frame.
         scan_from_frame(&probe_frame(), &config.encode)?;
         let listener = TcpListener::bind(address).map_err(|source| ColaError::Bind {
@@ -272,12 +268,10 @@ impl ColaServer {
             config,
             start: Instant::now(),
             shutdown: AtomicBool::new(false),
-            measuring: AtomicBool::new(true),
             counters: Counters::default(),
-            latest: Mutex::new(None),
+            device: Mutex::new(device),
             clients: Mutex::new(Vec::new()),
             retired: Mutex::new(Vec::new()),
-            ident_reply,
         });
         let accept_shared = Arc::clone(&shared);
         let accept = std::thread::Builder::new()
@@ -308,7 +302,7 @@ impl ColaServer {
     /// (nothing is sent then).
     pub fn publish(&self, frame: &LaserFrame) -> Result<usize, ColaError> {
         let shared = &self.shared;
-        if !shared.measuring.load(Ordering::Acquire) {
+        if !lock(&shared.device).is_measuring() {
             add(&shared.counters.while_stopped, 1);
             return Ok(0);
         }
@@ -328,7 +322,7 @@ impl ColaServer {
         bytes.push(ETX);
         let telegram = Arc::new(bytes);
         add(&shared.counters.published, 1);
-        *lock(&shared.latest) = Some(Arc::clone(&telegram));
+        lock(&shared.device).set_latest_scan(Arc::clone(&telegram));
 
         let mut queued = 0;
         let mut clients = lock(&shared.clients);
@@ -376,12 +370,13 @@ impl ColaServer {
 
     /// Whether the device is measuring (not stopped with `sMN LMCstopmeas`).
     pub fn is_measuring(&self) -> bool {
-        self.shared.measuring.load(Ordering::Acquire)
+        lock(&self.shared.device).is_measuring()
     }
 
     /// The counters.
     pub fn stats(&self) -> ServerStats {
         let c = &self.shared.counters;
+        let device = lock(&self.shared.device).stats().clone();
         let clients = lock(&self.shared.clients)
             .iter()
             .filter(|h| !h.shared.closed.load(Ordering::Acquire))
@@ -397,15 +392,17 @@ impl ColaServer {
             clients,
             clients_accepted: get(&c.accepted),
             clients_refused: get(&c.refused),
-            clients_dropped_for_errors: get(&c.dropped_for_errors),
+            clients_dropped_for_errors: device.dropped_for_errors,
             frames_published: get(&c.published),
             frames_while_stopped: get(&c.while_stopped),
             frames_queued: get(&c.queued),
             frames_sent: get(&c.sent),
             frames_dropped: get(&c.dropped),
-            requests: get(&c.requests),
-            bad_telegrams: get(&c.bad),
-            garbage_bytes: get(&c.garbage),
+            requests: device.requests,
+            bad_telegrams: device.bad_telegrams,
+            garbage_bytes: device.garbage_bytes,
+            access_denied: device.access_denied,
+            logins_refused: device.logins_refused,
         }
     }
 }
@@ -542,8 +539,10 @@ fn start_client(
     let _ = stream.set_nodelay(true);
     let reader_stream = stream.try_clone()?;
     let writer_stream = stream.try_clone()?;
+    let session = lock(&shared.device).open();
     let client = Arc::new(ClientShared {
         peer,
+        session,
         streaming: AtomicBool::new(false),
         closed: AtomicBool::new(false),
         sent: AtomicU64::new(0),
@@ -560,15 +559,16 @@ fn start_client(
     };
     let reader = {
         let reader_client = Arc::clone(&client);
-        let shared = Arc::clone(shared);
+        let reader_shared = Arc::clone(shared);
         let reader_tx = tx.clone();
         let spawned = std::thread::Builder::new()
             .name(format!("cola-rd-{peer}"))
-            .spawn(move || reader_loop(reader_stream, &reader_tx, &reader_client, &shared));
+            .spawn(move || reader_loop(reader_stream, &reader_tx, &reader_client, &reader_shared));
         match spawned {
             Ok(t) => t,
             Err(e) => {
                 client.closed.store(true, Ordering::Release);
+                lock(&shared.device).close(session);
                 let _ = stream.shutdown(Shutdown::Both);
                 drop(tx);
                 let _ = writer.join();
@@ -600,13 +600,10 @@ fn writer_loop(mut stream: TcpStream, rx: &Receiver<Out>, client: &ClientShared,
                 r
             }
             Out::Reply(bytes) => stream.write_all(&bytes),
-            Out::Stream(on) => {
+            Out::Stream(on, ack) => {
                 streaming = on;
                 client.streaming.store(on, Ordering::Release);
-                match Message::StreamScansAck(on).to_telegram() {
-                    Ok(bytes) => stream.write_all(&bytes),
-                    Err(_) => Ok(()),
-                }
+                stream.write_all(&ack)
             }
             Out::Close => break,
         };
@@ -626,11 +623,7 @@ fn reader_loop(
     client: &ClientShared,
     shared: &Shared,
 ) {
-    let mut decoder = TelegramDecoder::new(shared.config.max_telegram);
     let mut buf = vec![0u8; 4096];
-    let mut level = 0u8;
-    let mut errors_in_a_row = 0u32;
-    let mut garbage_seen = 0u64;
     'read: loop {
         let n = match stream.read(&mut buf) {
             Ok(0) => break,
@@ -638,121 +631,27 @@ fn reader_loop(
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(_) => break,
         };
-        decoder.push(&buf[..n]);
-        let garbage = decoder.garbage_bytes();
-        add(&shared.counters.garbage, garbage - garbage_seen);
-        garbage_seen = garbage;
-        while let Some(item) = decoder.next_telegram() {
-            let (reply, bad) = answer(item, &mut level, shared);
-            if bad {
-                errors_in_a_row += 1;
+        // The device answers under its lock; the answers are queued after it is freed.
+        let answers = lock(&shared.device).receive(client.session, &buf[..n]);
+        for answer in answers {
+            if answer.bad {
                 add(&client.bad, 1);
-                add(&shared.counters.bad, 1);
-            } else {
-                errors_in_a_row = 0;
-                add(&shared.counters.requests, 1);
             }
-            if tx.send(reply).is_err() {
+            let out = match answer.stream {
+                Some(on) => Out::Stream(on, answer.telegram),
+                None => Out::Reply(answer.telegram),
+            };
+            if tx.send(out).is_err() {
                 break 'read;
             }
-            if errors_in_a_row >= shared.config.max_consecutive_errors.max(1) {
-                add(&shared.counters.dropped_for_errors, 1);
-                tracing::warn!(peer = %client.peer, errors = errors_in_a_row, "CoLa client sends only bad telegrams, disconnecting");
+            if answer.disconnect {
+                tracing::warn!(peer = %client.peer, "CoLa client sends only bad telegrams, disconnecting");
                 break 'read;
             }
         }
     }
+    lock(&shared.device).close(client.session);
     client.closed.store(true, Ordering::Release);
     let _ = tx.send(Out::Close);
     tracing::info!(peer = %client.peer, "CoLa client disconnected");
-}
-
-fn reply(msg: &Message) -> Out {
-    match msg.to_telegram() {
-        Ok(bytes) => Out::Reply(bytes),
-        // Answers are built from known-good parts; this cannot happen, but answer anyway.
-        Err(_) => error_reply(SopasError(0x14)),
-    }
-}
-
-fn error_reply(e: SopasError) -> Out {
-    reply(&Message::Error(e))
-}
-
-/// The answer to one telegram (or framing error) and whether it was bad.
-fn answer(item: Result<Vec<u8>, FrameError>, level: &mut u8, shared: &Shared) -> (Out, bool) {
-    let payload = match item {
-        Ok(p) => p,
-        Err(FrameError::TooLong { .. }) => return (error_reply(SopasError::BUFFER_OVERFLOW), true),
-        Err(FrameError::Unterminated { .. }) => {
-            return (error_reply(SopasError::BUFFER_UNDERFLOW), true);
-        }
-    };
-    let msg = match Message::parse(&payload) {
-        Ok(m) => m,
-        Err(e) => {
-            tracing::debug!(error = %e, telegram = %super::preview(&payload), "CoLa server: bad telegram");
-            let code = if e.field == "command type" {
-                SopasError::UNKNOWN_COLA_COMMAND
-            } else {
-                SopasError::for_parse_error(&e)
-            };
-            return (error_reply(code), true);
-        }
-    };
-    let logged_in = *level >= 3 || !shared.config.require_login;
-    let out = match msg {
-        Message::PollScan => match lock(&shared.latest).clone() {
-            Some(t) => {
-                let mut bytes = t.as_ref().clone();
-                if bytes.len() > 4 {
-                    bytes[1..4].copy_from_slice(ScanKind::Polled.command_type().as_bytes());
-                }
-                Out::Reply(bytes)
-            }
-            None => error_reply(SopasError::LOCAL_CONDITION_FAILED),
-        },
-        Message::StreamScans(on) => Out::Stream(on),
-        Message::SetAccessMode { level: l, password } => {
-            let ok = matches!(
-                (l, password),
-                (2, MAINTENANCE_PASSWORD) | (3, AUTHORIZED_CLIENT_PASSWORD) | (4, SERVICE_PASSWORD)
-            );
-            if ok {
-                *level = l;
-            }
-            reply(&Message::AccessModeAck(ok))
-        }
-        Message::ReadDeviceIdent => Out::Reply(shared.ident_reply.clone()),
-        Message::StartMeasurement | Message::StopMeasurement | Message::Run if !logged_in => {
-            error_reply(SopasError::METHOD_ACCESS_DENIED)
-        }
-        Message::StartMeasurement => {
-            shared.measuring.store(true, Ordering::Release);
-            reply(&Message::StartMeasurementAck(0))
-        }
-        Message::StopMeasurement => {
-            shared.measuring.store(false, Ordering::Release);
-            reply(&Message::StopMeasurementAck(0))
-        }
-        Message::Run => reply(&Message::RunAck(true)),
-        Message::ReadDeviceState => reply(&Message::DeviceState(1)),
-        Message::Other { kind, .. } => error_reply(match kind.as_str() {
-            "sRN" | "sWN" => SopasError::VARIABLE_UNKNOWN_INDEX,
-            "sMN" => SopasError::METHOD_UNKNOWN_INDEX,
-            "sEN" => SopasError::EVENT_UNKNOWN_INDEX,
-            _ => SopasError::UNKNOWN_COLA_COMMAND,
-        }),
-        // Answers and events are what a device sends, not what it is sent.
-        Message::Scan { .. }
-        | Message::StreamScansAck(_)
-        | Message::AccessModeAck(_)
-        | Message::DeviceIdent { .. }
-        | Message::StartMeasurementAck(_)
-        | Message::StopMeasurementAck(_)
-        | Message::RunAck(_)
-        | Message::DeviceState(_)
-        | Message::Error(_) => error_reply(SopasError::UNKNOWN_COLA_COMMAND),
-    };
-    (out, false)
 }
