@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use ugv_fields::{
+    FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, within,
+};
 
 /// Why a configuration was refused.
 #[derive(Debug, thiserror::Error)]
@@ -17,12 +20,9 @@ pub enum ConfigError {
     },
     #[error("{file}: {message}")]
     Parse { file: String, message: String },
-    #[error("{file}: {field}: {message}")]
-    Invalid {
-        file: String,
-        field: String,
-        message: String,
-    },
+    /// A well-formed value that makes no sense, with the file and line it is on.
+    #[error(transparent)]
+    Invalid(#[from] ugv_fields::LocatedError),
 }
 
 pub use firmware_bridge::geodesy::Datum;
@@ -237,12 +237,7 @@ impl ControllerConfig {
             file: file.to_owned(),
             message: e.to_string().trim_end().to_owned(),
         })?;
-        cfg.validate()
-            .map_err(|(field, message)| ConfigError::Invalid {
-                file: file.to_owned(),
-                field,
-                message,
-            })?;
+        cfg.validate().map_err(|e| e.located(text, file))?;
         Ok(cfg)
     }
 
@@ -254,122 +249,130 @@ impl ControllerConfig {
         ControllerConfig::from_toml(&text, &path.display().to_string())
     }
 
-    /// The first field that makes no sense, and why.
-    pub fn validate(&self) -> Result<(), (String, String)> {
-        let fields: [(&str, f64, bool); 22] = [
-            ("mission.start_x", self.mission.start_x, false),
-            ("mission.start_y", self.mission.start_y, false),
-            ("mission.goal_x", self.mission.goal_x, false),
-            ("mission.goal_y", self.mission.goal_y, false),
-            ("mission.goal_tolerance", self.mission.goal_tolerance, true),
-            ("vehicle.wheelbase", self.vehicle.wheelbase, true),
-            ("vehicle.max_steer_deg", self.vehicle.max_steer_deg, true),
-            ("vehicle.max_speed", self.vehicle.max_speed, true),
-            ("vehicle.radius", self.vehicle.radius, true),
-            ("vehicle.antenna_x", self.vehicle.antenna_x, false),
-            ("vehicle.antenna_y", self.vehicle.antenna_y, false),
-            ("vehicle.laser_x", self.vehicle.laser_x, false),
-            ("vehicle.laser_y", self.vehicle.laser_y, false),
-            (
-                "planner.replan_period_s",
-                self.planner.replan_period_s,
-                true,
-            ),
-            ("planner.cruise_speed", self.planner.cruise_speed, true),
-            ("planner.steer_usage", self.planner.steer_usage, true),
-            ("follower.omega", self.follower.omega, true),
-            ("follower.zeta", self.follower.zeta, true),
-            ("follower.decel", self.follower.decel, true),
-            ("safety.gps_timeout_s", self.safety.gps_timeout_s, true),
-            ("safety.laser_timeout_s", self.safety.laser_timeout_s, true),
-            (
-                "safety.report_timeout_s",
-                self.safety.report_timeout_s,
-                true,
-            ),
-        ];
-        for (name, v, positive) in fields {
-            if !v.is_finite() {
-                return Err((name.to_owned(), format!("{v} is not a finite number")));
-            }
-            if positive && v <= 0.0 {
-                return Err((name.to_owned(), format!("must be positive, is {v}")));
-            }
-        }
+    /// The first field that makes no sense, and why: every field is finite, has the
+    /// right sign and lies within plausible bounds (the DBC's signal ranges where a
+    /// field ends up on the bus), and the perception tuning passes perception's own
+    /// checks. [`crate::core::Controller::new`] runs this too, so nothing builds a
+    /// controller from a configuration `check-config` would refuse.
+    pub fn validate(&self) -> Result<(), FieldError> {
         let m = &self.mission;
+        let at = |k: &'static str| FieldPath::of(&["mission", k]);
+        let d = &m.datum;
+        within(&at("datum").key("latitude"), d.latitude, -89.0, 89.0, "degrees")?;
+        within(&at("datum").key("longitude"), d.longitude, -180.0, 180.0, "degrees")?;
+        within(&at("datum").key("altitude"), d.altitude, -1_000.0, 10_000.0, "m")?;
+        coordinate(&at("start_x"), m.start_x)?;
+        coordinate(&at("start_y"), m.start_y)?;
+        coordinate(&at("goal_x"), m.goal_x)?;
+        coordinate(&at("goal_y"), m.goal_y)?;
+        if let Some(h) = m.goal_heading_deg {
+            angle_deg(&at("goal_heading_deg"), h)?;
+        }
+        positive_up_to(&at("goal_tolerance"), m.goal_tolerance, 50.0, "m")?;
         if (m.goal_x - m.start_x).hypot(m.goal_y - m.start_y) < 1.0 {
-            return Err((
-                "mission.goal_x".to_owned(),
-                "the goal must be at least 1 m from the start".to_owned(),
+            return Err(FieldError::new(
+                at("goal_x"),
+                "the goal must be at least 1 m from the start",
             ));
         }
-        if !(-89.0..=89.0).contains(&m.datum.latitude)
-            || !(-180.0..=180.0).contains(&m.datum.longitude)
-        {
-            return Err((
-                "mission.datum".to_owned(),
-                "latitude must be within ±89°, longitude within ±180°".to_owned(),
+
+        let v = &self.vehicle;
+        let at = |k: &'static str| FieldPath::of(&["vehicle", k]);
+        positive_up_to(&at("wheelbase"), v.wheelbase, 10.0, "m")?;
+        positive(&at("max_steer_deg"), v.max_steer_deg)?;
+        if v.max_steer_deg >= 60.0 {
+            return Err(FieldError::new(
+                at("max_steer_deg"),
+                format!("must be below 60 degrees, is {}", v.max_steer_deg),
             ));
         }
-        if self.vehicle.max_steer_deg >= 60.0 {
-            return Err((
-                "vehicle.max_steer_deg".to_owned(),
-                "must be below 60 degrees".to_owned(),
-            ));
-        }
-        if self.planner.steer_usage > 1.0 {
-            return Err((
-                "planner.steer_usage".to_owned(),
-                "must not exceed 1".to_owned(),
-            ));
-        }
-        if self.planner.pace_fractions.is_empty()
-            || self
-                .planner
-                .pace_fractions
-                .iter()
-                .any(|f| !(f.is_finite() && *f > 0.0 && *f <= 1.0))
-        {
-            return Err((
-                "planner.pace_fractions".to_owned(),
-                "must be one or more fractions in (0, 1]".to_owned(),
-            ));
-        }
-        for (name, v) in [
-            (
-                "planner.moving_time_margin_s",
-                self.planner.moving_time_margin_s,
-            ),
-            ("planner.moving_margin", self.planner.moving_margin),
-            ("planner.pace_time_weight", self.planner.pace_time_weight),
-            ("planner.align_speed", self.planner.align_speed),
+        // The DBC's MaxRate and TargetSpeed ranges.
+        within(&at("steer_rate_deg_s"), v.steer_rate_deg_s, 0.0, 500.0, "deg/s")?;
+        positive_up_to(&at("max_speed"), v.max_speed, 10.0, "m/s")?;
+        positive_up_to(&at("radius"), v.radius, 20.0, "m")?;
+        for (k, x) in [
+            ("antenna_x", v.antenna_x),
+            ("antenna_y", v.antenna_y),
+            ("laser_x", v.laser_x),
+            ("laser_y", v.laser_y),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err((name.to_owned(), format!("must not be negative, is {v}")));
-            }
+            within(&at(k), x, -20.0, 20.0, "m from the rear axle")?;
         }
+        angle_deg(&at("laser_yaw_deg"), v.laser_yaw_deg)?;
+
         let pc = &self.planner;
+        let at = |k: &'static str| FieldPath::of(&["planner", k]);
+        positive_up_to(&at("replan_period_s"), pc.replan_period_s, 10.0, "s")?;
+        within(&at("safety_margin"), pc.safety_margin, 0.0, 5.0, "m")?;
+        positive(&at("cruise_speed"), pc.cruise_speed)?;
+        if pc.cruise_speed > v.max_speed {
+            return Err(FieldError::new(
+                at("cruise_speed"),
+                format!("{} exceeds vehicle.max_speed {}", pc.cruise_speed, v.max_speed),
+            ));
+        }
+        positive_up_to(&at("steer_usage"), pc.steer_usage, 1.0, "")?;
+        within(&at("final_approach"), pc.final_approach, 0.0, 100.0, "m")?;
+        if pc.pace_fractions.is_empty() || pc.pace_fractions.len() > 32 {
+            return Err(FieldError::new(
+                at("pace_fractions"),
+                format!("must be 1 to 32 fractions, has {}", pc.pace_fractions.len()),
+            ));
+        }
+        for (i, f) in pc.pace_fractions.iter().enumerate() {
+            positive_up_to(&at("pace_fractions").index(i), *f, 1.0, "")?;
+        }
+        within(&at("moving_time_margin_s"), pc.moving_time_margin_s, 0.0, 10.0, "s")?;
+        within(&at("moving_margin"), pc.moving_margin, 0.0, 5.0, "m")?;
+        within(&at("pace_time_weight"), pc.pace_time_weight, 0.0, 1e6, "m^3/s")?;
+        positive_up_to(&at("align_enter_deg"), pc.align_enter_deg, 90.0, "degrees")?;
+        positive_up_to(&at("align_exit_deg"), pc.align_exit_deg, 90.0, "degrees")?;
         if !(pc.align_exit_deg > 0.0
             && pc.align_exit_deg < pc.align_enter_deg
             && pc.align_enter_deg < 90.0)
         {
-            return Err((
-                "planner.align_enter_deg".to_owned(),
-                "need 0 < align_exit_deg < align_enter_deg < 90".to_owned(),
+            return Err(FieldError::new(
+                at("align_enter_deg"),
+                format!(
+                    "need 0 < align_exit_deg < align_enter_deg < 90, have {} and {}",
+                    pc.align_exit_deg, pc.align_enter_deg
+                ),
             ));
         }
-        if self.planner.cruise_speed > self.vehicle.max_speed {
-            return Err((
-                "planner.cruise_speed".to_owned(),
-                "exceeds vehicle.max_speed".to_owned(),
+        positive(&at("align_speed"), pc.align_speed)?;
+        if pc.align_speed > v.max_speed {
+            return Err(FieldError::new(
+                at("align_speed"),
+                format!("{} exceeds vehicle.max_speed {}", pc.align_speed, v.max_speed),
             ));
         }
-        if self.follower.kind == FollowerKind::Anfis && self.follower.anfis_model.is_none() {
-            return Err((
-                "follower.anfis_model".to_owned(),
-                "is required when follower.kind = \"anfis\"".to_owned(),
+
+        let f = &self.follower;
+        let at = |k: &'static str| FieldPath::of(&["follower", k]);
+        positive_up_to(&at("omega"), f.omega, 20.0, "rad/s")?;
+        positive_up_to(&at("zeta"), f.zeta, 10.0, "")?;
+        positive_up_to(&at("max_lateral_accel"), f.max_lateral_accel, 20.0, "m/s^2")?;
+        positive_up_to(&at("decel"), f.decel, 10.0, "m/s^2")?;
+        // The DBC's AccelLimit range (0: the ECU's own limit).
+        within(&at("accel_limit"), f.accel_limit, 0.0, 5.0, "m/s^2")?;
+        if f.kind == FollowerKind::Anfis && f.anfis_model.is_none() {
+            return Err(FieldError::new(
+                at("anfis_model"),
+                "is required when follower.kind = \"anfis\"",
             ));
         }
-        Ok(())
+
+        let s = &self.safety;
+        let at = |k: &'static str| FieldPath::of(&["safety", k]);
+        positive_up_to(&at("gps_timeout_s"), s.gps_timeout_s, 10.0, "s")?;
+        positive_up_to(&at("laser_timeout_s"), s.laser_timeout_s, 10.0, "s")?;
+        positive_up_to(&at("report_timeout_s"), s.report_timeout_s, 10.0, "s")?;
+
+        self.perception.validate().map_err(|e| match e {
+            crate::perception::PerceptionError::InvalidConfig { field, message } => {
+                FieldError::new(FieldPath::of(&["perception", field]), message)
+            }
+            other => FieldError::new(FieldPath::of(&["perception"]), other.to_string()),
+        })
     }
 }

@@ -17,6 +17,7 @@ use crate::config::ControllerConfig;
 use crate::guidance::{
     Circle, FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
 };
+use crate::intrusion::ActuationWatch;
 use crate::localisation::{Localiser, Pose};
 use crate::perception::{Perception, PerceptionError, Pose2, Scan};
 
@@ -36,6 +37,8 @@ const STOPPED: f64 = 0.05;
 /// Why the controller could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum ControllerError {
+    #[error("configuration: {0}")]
+    Config(#[from] ugv_fields::FieldError),
     #[error("datum: {0}")]
     Datum(#[from] firmware_bridge::geodesy::GeodesyError),
     #[error(transparent)]
@@ -136,11 +139,16 @@ pub struct Controller {
     worker: Option<PlanWorker>,
     /// The code sent in FAULT_REPORT while in estop.
     fault_code: FaultReportCode,
+    /// The FAULT_REPORT detail while in estop (the CAN ID a finding concerns).
+    fault_detail: u16,
+    /// Commands the controller did not send, watched for on the bus.
+    watch: ActuationWatch,
     pub samples: Vec<Sample>,
 }
 
 impl Controller {
     pub fn new(cfg: &ControllerConfig) -> Result<Controller, ControllerError> {
+        cfg.validate()?;
         // Walls become chains of circles sized for the radius the planner inflates by.
         let mut perception = cfg.perception.clone();
         perception.vehicle_radius = cfg.vehicle.radius + cfg.planner.safety_margin;
@@ -162,6 +170,8 @@ impl Controller {
             bad_scans: 0,
             worker: None,
             fault_code: FaultReportCode::Internal,
+            fault_detail: 0,
+            watch: ActuationWatch::new(),
             samples: Vec::new(),
         })
     }
@@ -208,6 +218,11 @@ impl Controller {
         self.stop_reason.as_deref()
     }
 
+    /// The watch for commands the controller did not send (its findings).
+    pub fn watch(&self) -> &ActuationWatch {
+        &self.watch
+    }
+
     /// The obstacles guidance plans around.
     pub fn obstacles(&self) -> &[Circle] {
         &self.obstacles
@@ -225,6 +240,13 @@ impl Controller {
 
     /// A frame from the bus.
     pub fn on_can(&mut self, now: f64, received: &Received) {
+        // Commands it did not send: estop at once, in any mode, keeping the first.
+        if let Some(f) = self.watch.on_can(now, received) {
+            if !matches!(self.mode, Mode::Estop { .. }) {
+                self.estop(f.code, f.reason);
+                self.fault_detail = f.detail;
+            }
+        }
         let Received::Message(m) = received else {
             return;
         };
@@ -262,10 +284,17 @@ impl Controller {
         self.loc.on_fix(now, reading);
     }
 
-    /// A laser scan.
+    /// A laser scan. Only a scan perception accepts counts as one for the laser-silence
+    /// watchdog: a stream of scans it refuses (a bad frame, a mounting it cannot use)
+    /// is blindness, and stops the car like silence does.
     pub fn on_scan(&mut self, now: f64, scan: &Scan<'_>) {
-        self.last_scan = Some(now);
+        if scan.validate().is_err() {
+            self.bad_scans += 1;
+            return;
+        }
         let Some(pose) = self.loc.predict(now) else {
+            // No pose to place it yet: a well-formed scan still shows the laser lives.
+            self.last_scan = Some(now);
             return;
         };
         let v = &self.cfg.vehicle;
@@ -282,6 +311,7 @@ impl Controller {
         // A malformed scan is counted and skipped; silence is what the safety checks.
         match self.perception.update(scan, &mount, &at) {
             Ok(out) => {
+                self.last_scan = Some(now);
                 self.obstacles = out
                     .obstacles
                     .iter()
@@ -350,12 +380,21 @@ impl Controller {
         Ok(())
     }
 
+    /// A fault found outside the core (a port lost, a process stopping): estop now,
+    /// with `code` in FAULT_REPORT and `reason` in the mode.
+    pub fn fail(&mut self, code: FaultReportCode, reason: String) {
+        if !matches!(self.mode, Mode::Estop { .. }) {
+            self.estop(code, reason);
+        }
+    }
+
     fn estop(&mut self, code: FaultReportCode, reason: String) {
         self.mode = Mode::Estop {
             code: code.label().to_owned(),
             reason,
         };
         self.fault_code = code;
+        self.fault_detail = 0;
         self.next_fault = 0.0;
     }
 
@@ -518,10 +557,11 @@ impl Controller {
             out.push(GolfCarMessage::FaultReport(FaultReport {
                 source: FaultReportSource::Controller,
                 code: self.fault_code,
-                detail: 0,
+                detail: self.fault_detail,
             }));
             self.next_fault = now + FAULT_PERIOD;
         }
+        self.watch.commanded(now, &out, hold);
         out
     }
 }

@@ -8,7 +8,8 @@
 //! ```
 //!
 //! Exit codes of `run`: 0 mission complete (arrived and stopped), 1 safety stop
-//! (estop), 3 ended by a signal, 4 error.
+//! (estop: ended by a signal while in estop, or a port lost, after the estop went
+//! out), 3 ended by a signal, 4 error (including the CAN port failing mid-run).
 
 use std::io::{IsTerminal, Read};
 use std::path::PathBuf;
@@ -18,15 +19,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use chrono::Timelike;
 use clap::{Args, Parser, Subcommand};
 use firmware_bridge::CanPort;
-use firmware_bridge::clock::{Clock, WallClock, monotonic_ns};
+use firmware_bridge::clock::WallClock;
 use firmware_bridge::laser::LaserSubscriber;
-use firmware_bridge::nmea::{NmeaLink, ReadEvent, ReaderConfig, open_serial};
+use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use ugv_controller::config::{ControllerConfig, FollowerKind};
-use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode, scan_of};
-use ugv_controller::trace::{FixTiming, Trace};
+use ugv_controller::core::{COMMAND_PERIOD, Controller};
+use ugv_controller::runtime::Runtime;
+use ugv_controller::trace::TraceWriter;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -81,10 +82,12 @@ struct RunArgs {
     /// Override the ANFIS model file.
     #[arg(long)]
     anfis_model: Option<PathBuf>,
-    /// Write the run's trace (samples, plans, obstacles, mode) as JSON at exit.
+    /// Write the run's trace (samples, plans, obstacles, mode) as JSON Lines while it
+    /// drives (flushed every second and at every change of mode).
     #[arg(long)]
     trace: Option<PathBuf>,
-    /// Write the follower's training data (CSV: e_y, e_theta, phi_ref, steer_cmd) at exit.
+    /// Write the follower's training data (CSV: e_y, e_theta, phi_ref, steer_cmd) while
+    /// it drives.
     #[arg(long)]
     record: Option<PathBuf>,
     /// Seconds between status lines (0: none).
@@ -175,6 +178,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::CheckConfig { config } => {
             let cfg = ControllerConfig::load(&config)?;
+            // Exactly what `run` builds before it opens a port.
+            Controller::new(&cfg)?;
             print!("{}", toml::to_string_pretty(&cfg)?);
             Ok(ExitCode::SUCCESS)
         }
@@ -193,14 +198,31 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     if let Some(model) = &args.anfis_model {
         cfg.follower.anfis_model = Some(model.clone());
     }
-    cfg.validate()
-        .map_err(|(field, message)| anyhow::anyhow!("{field}: {message}"))?;
-    let mut ctl = Controller::new(&cfg)?
+    anyhow::ensure!(
+        args.status_every.is_finite() && (0.0..=3600.0).contains(&args.status_every),
+        "--status-every must be within [0, 3600] s, is {}",
+        args.status_every
+    );
+    // The same checks as check-config: the configuration's, then the controller's own.
+    let ctl = Controller::new(&cfg)?
         .with_planning_thread()
         .context("starting the planning thread")?;
-    let mut can = CanPort::open(&args.can)?;
+    let create = |p: &PathBuf| {
+        std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))
+    };
+    let trace = match (&args.trace, &args.record) {
+        (None, None) => None,
+        (trace, record) => Some(
+            TraceWriter::new(
+                trace.as_ref().map(create).transpose()?,
+                record.as_ref().map(create).transpose()?,
+            )
+            .context("writing the trace")?,
+        ),
+    };
+    let can = CanPort::open(&args.can)?;
     let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
-    let mut gps = NmeaLink::new(port, ReaderConfig::default());
+    let gps = NmeaLink::new(port, ReaderConfig::default());
     let laser = LaserSubscriber::new(&args.laser)?;
     eprintln!(
         "ugv-controller: GPS {} at {} baud, laser {}, CAN {}, follower {:?}",
@@ -215,97 +237,48 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
 
+    let mut rt = Runtime::new(ctl, gps, laser, can).with_fix_timing();
+    if let Some(w) = trace {
+        rt = rt.with_trace(w);
+    }
     let mut clock = WallClock::new(COMMAND_PERIOD);
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();
-    let mut k: u64 = 0;
-    // Fixes read and not yet followed by a steering command: (UTC s of day, read ns).
-    let mut unanswered: Vec<(f64, u64)> = Vec::new();
-    let mut fix_timing = Vec::new();
-    let code = loop {
-        clock.wait_tick(k);
-        let now = k as f64 * COMMAND_PERIOD;
-        k += 1;
-        while let Some(r) = can.try_recv() {
-            ctl.on_can(now, &r);
+    let exit = rt.run(&mut clock, &stop, |k, now, rt| {
+        if status_ticks == 0 || k % status_ticks != 0 {
+            return;
         }
-        for event in gps.poll()? {
-            if let ReadEvent::Fix(reading) = event {
-                if let Some(t) = reading.time {
-                    unanswered.push((
-                        f64::from(t.num_seconds_from_midnight()) + f64::from(t.nanosecond()) * 1e-9,
-                        monotonic_ns(),
-                    ));
-                }
-                ctl.on_gps(now, &reading);
-            }
+        let ctl = rt.controller();
+        let line = match ctl.pose(now) {
+            Some(p) => format!(
+                "t={now:7.2}s {:?} x={:7.2} y={:7.2} hdg={:6.1}° v={:4.2} obstacles={} {}",
+                ctl.mode(),
+                p.x,
+                p.y,
+                p.theta.to_degrees(),
+                p.v,
+                ctl.obstacles().len(),
+                ctl.stop_reason().unwrap_or("")
+            ),
+            None => format!("t={now:7.2}s {:?} (no position yet)", ctl.mode()),
+        };
+        if tty {
+            eprint!("\r\x1b[2K{line}");
+        } else {
+            eprintln!("{line}");
         }
-        while let Some(frame) = laser.try_recv()? {
-            ctl.on_scan(now, &scan_of(&frame, now));
-        }
-        for m in ctl.tick(now) {
-            can.send_message(&m)?;
-            if matches!(m, golf_car_can::GolfCarMessage::SteeringCmd(_)) {
-                let sent = monotonic_ns();
-                fix_timing.extend(unanswered.drain(..).map(|(utc_s, read_ns)| FixTiming {
-                    utc_s,
-                    read_ns,
-                    command_ns: sent,
-                }));
-            }
-        }
-        if status_ticks > 0 && k % status_ticks == 0 {
-            let line = match ctl.pose(now) {
-                Some(p) => format!(
-                    "t={now:7.2}s {:?} x={:7.2} y={:7.2} hdg={:6.1}° v={:4.2} obstacles={} {}",
-                    ctl.mode(),
-                    p.x,
-                    p.y,
-                    p.theta.to_degrees(),
-                    p.v,
-                    ctl.obstacles().len(),
-                    ctl.stop_reason().unwrap_or("")
-                ),
-                None => format!("t={now:7.2}s {:?} (no position yet)", ctl.mode()),
-            };
-            if tty {
-                eprint!("\r\x1b[2K{line}");
-            } else {
-                eprintln!("{line}");
-            }
-        }
-        if ctl.finished() {
-            break 0;
-        }
-        // In estop the heartbeat and FAULT_REPORT go on until a signal ends the process.
-        if stop.load(Ordering::Relaxed) {
-            // Leave the car safe: a few estop heartbeats before going.
-            for _ in 0..5 {
-                can.send(&golf_car_can::ControllerHeartbeat {
-                    state: golf_car_can::ControllerHeartbeatState::Estop,
-                })?;
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            break if matches!(ctl.mode(), Mode::Estop { .. }) {
-                1
-            } else {
-                3
-            };
-        }
-    };
+    });
     if tty {
         eprintln!();
     }
-    eprintln!("ugv-controller: {:?}; CAN {:?}", ctl.mode(), can.stats());
-    let mut trace = Trace::of(&ctl, clock.now());
-    trace.fix_timing = fix_timing;
-    if let Some(path) = &args.trace {
-        std::fs::write(path, serde_json::to_string(&trace)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+    eprintln!(
+        "ugv-controller: {exit:?}; {:?}; CAN {:?}; inputs {:?}",
+        rt.controller().mode(),
+        rt.can().stats(),
+        rt.stats
+    );
+    if let Some(e) = rt.trace_error() {
+        eprintln!("ugv-controller: the trace is incomplete: {e}");
     }
-    if let Some(path) = &args.record {
-        std::fs::write(path, trace.training_csv())
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(ExitCode::from(code))
+    Ok(ExitCode::from(exit.code()))
 }

@@ -1,6 +1,14 @@
 //! What a run leaves behind: the control samples, every replanning, the obstacles
-//! last seen and the final mode, as JSON (for the verdict and the plots) and the
-//! follower's training data as CSV (for `anfis train`).
+//! last seen and the final mode (for the verdict and the plots), and the follower's
+//! training data as CSV (for `anfis train`).
+//!
+//! The controller binary writes its trace while it drives, as JSON Lines
+//! ([`TraceWriter`]): one record per line, flushed at least once a second and at
+//! every change of mode, so a controller killed with SIGKILL leaves everything up to
+//! its last second on disk. [`Trace::from_jsonl`] reads such a file back, a cut-off
+//! last line included.
+
+use std::io::Write;
 
 use serde::Serialize;
 
@@ -35,19 +43,61 @@ pub struct FixTiming {
     pub command_ns: u64,
 }
 
+/// Root mean square of the lateral error of `samples`, metres.
+fn tracking_error_rms(samples: &[Sample]) -> f64 {
+    let n = samples.len().max(1) as f64;
+    (samples.iter().map(|s| s.inputs.e_y.powi(2)).sum::<f64>() / n).sqrt()
+}
+
+/// The header row of the training CSV.
+const CSV_HEADER: &str = "t,e_y,e_theta,phi_ref,v,steer_cmd\n";
+
+/// One training CSV row.
+fn csv_row(s: &Sample) -> String {
+    format!(
+        "{},{},{},{},{},{}\n",
+        s.t, s.inputs.e_y, s.inputs.e_theta, s.inputs.phi_ref, s.inputs.v, s.steer_cmd
+    )
+}
+
+/// The controller's state at a moment: written at every flush and change of mode, the
+/// last one read back is the trace's final state.
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct StateRecord {
+    pub t: f64,
+    pub mode: Mode,
+    pub obstacles: Vec<Circle>,
+}
+
+/// One line of a JSON Lines trace.
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TraceRecord {
+    Sample(Sample),
+    Plan(PlanRecord),
+    Fix(FixTiming),
+    State(StateRecord),
+}
+
+/// Why a JSON Lines trace could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum TraceReadError {
+    #[error("trace line {line}: {source}")]
+    Line {
+        line: usize,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("the trace has no state record")]
+    NoState,
+}
+
 impl Trace {
     pub fn of(ctl: &Controller, duration: f64) -> Trace {
-        let n = ctl.samples.len().max(1) as f64;
         Trace {
             mode: ctl.mode().clone(),
             duration,
-            tracking_error_rms: (ctl
-                .samples
-                .iter()
-                .map(|s| s.inputs.e_y.powi(2))
-                .sum::<f64>()
-                / n)
-                .sqrt(),
+            tracking_error_rms: tracking_error_rms(&ctl.samples),
             samples: ctl.samples.clone(),
             plans: ctl.nav.plans.clone(),
             obstacles: ctl.obstacles().to_vec(),
@@ -55,15 +105,145 @@ impl Trace {
         }
     }
 
+    /// A trace written by [`TraceWriter`]. A last line without its newline (the
+    /// writer was killed while writing it) is ignored; any other bad line is an error.
+    pub fn from_jsonl(text: &str) -> Result<Trace, TraceReadError> {
+        let complete = text.ends_with('\n');
+        let lines: Vec<&str> = text.lines().collect();
+        let mut samples = Vec::new();
+        let mut plans = Vec::new();
+        let mut fix_timing = Vec::new();
+        let mut state: Option<StateRecord> = None;
+        for (i, line) in lines.iter().enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let record = match serde_json::from_str::<TraceRecord>(line) {
+                Ok(r) => r,
+                Err(_) if i + 1 == lines.len() && !complete => break,
+                Err(source) => return Err(TraceReadError::Line { line: i + 1, source }),
+            };
+            match record {
+                TraceRecord::Sample(s) => samples.push(s),
+                TraceRecord::Plan(p) => plans.push(p),
+                TraceRecord::Fix(f) => fix_timing.push(f),
+                TraceRecord::State(s) => state = Some(s),
+            }
+        }
+        let state = state.ok_or(TraceReadError::NoState)?;
+        Ok(Trace {
+            mode: state.mode,
+            duration: state.t,
+            tracking_error_rms: tracking_error_rms(&samples),
+            samples,
+            plans,
+            obstacles: state.obstacles,
+            fix_timing,
+        })
+    }
+
     /// The follower's inputs and its steering command, one row per control tick.
     pub fn training_csv(&self) -> String {
-        let mut out = String::from("t,e_y,e_theta,phi_ref,v,steer_cmd\n");
+        let mut out = String::from(CSV_HEADER);
         for s in &self.samples {
-            out.push_str(&format!(
-                "{},{},{},{},{},{}\n",
-                s.t, s.inputs.e_y, s.inputs.e_theta, s.inputs.phi_ref, s.inputs.v, s.steer_cmd
-            ));
+            out.push_str(&csv_row(s));
         }
         out
+    }
+}
+
+/// How often at least the trace reaches the disk, seconds of controller time.
+pub const TRACE_FLUSH_PERIOD: f64 = 1.0;
+
+/// Writes a run's trace as JSON Lines (and optionally the training CSV) while the
+/// controller drives: what the controller added since the last call goes out at every
+/// [`TraceWriter::update`], and reaches the file (a `write` to the kernel, which keeps
+/// it when the process is killed) at least every [`TRACE_FLUSH_PERIOD`] and at every
+/// change of mode.
+#[derive(Debug)]
+pub struct TraceWriter<W: Write = std::fs::File> {
+    trace: Option<std::io::BufWriter<W>>,
+    csv: Option<std::io::BufWriter<W>>,
+    samples: usize,
+    plans: usize,
+    fixes: usize,
+    mode: Option<Mode>,
+    last_flush: f64,
+}
+
+impl<W: Write> TraceWriter<W> {
+    /// A writer of the trace to `trace` and the training CSV to `csv`, each when given.
+    pub fn new(trace: Option<W>, csv: Option<W>) -> std::io::Result<TraceWriter<W>> {
+        let mut csv = csv.map(std::io::BufWriter::new);
+        if let Some(c) = &mut csv {
+            c.write_all(CSV_HEADER.as_bytes())?;
+        }
+        Ok(TraceWriter {
+            trace: trace.map(std::io::BufWriter::new),
+            csv,
+            samples: 0,
+            plans: 0,
+            fixes: 0,
+            mode: None,
+            last_flush: f64::NEG_INFINITY,
+        })
+    }
+
+    fn record(&mut self, r: &TraceRecord) -> std::io::Result<()> {
+        match &mut self.trace {
+            Some(t) => {
+                serde_json::to_writer(&mut *t, r)?;
+                t.write_all(b"\n")
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Write what is new in `ctl` (and `fixes`, the fix timings so far) at `now`.
+    pub fn update(&mut self, now: f64, ctl: &Controller, fixes: &[FixTiming]) -> std::io::Result<()> {
+        for s in ctl.samples.get(self.samples..).unwrap_or(&[]) {
+            self.record(&TraceRecord::Sample(*s))?;
+            if let Some(c) = &mut self.csv {
+                c.write_all(csv_row(s).as_bytes())?;
+            }
+        }
+        self.samples = ctl.samples.len();
+        for p in ctl.nav.plans.get(self.plans..).unwrap_or(&[]) {
+            self.record(&TraceRecord::Plan(p.clone()))?;
+        }
+        self.plans = ctl.nav.plans.len();
+        for f in fixes.get(self.fixes..).unwrap_or(&[]) {
+            self.record(&TraceRecord::Fix(*f))?;
+        }
+        self.fixes = fixes.len();
+        let changed = self.mode.as_ref() != Some(ctl.mode());
+        if changed || now - self.last_flush >= TRACE_FLUSH_PERIOD {
+            self.mode = Some(ctl.mode().clone());
+            self.record(&TraceRecord::State(StateRecord {
+                t: now,
+                mode: ctl.mode().clone(),
+                obstacles: ctl.obstacles().to_vec(),
+            }))?;
+            self.flush()?;
+            self.last_flush = now;
+        }
+        Ok(())
+    }
+
+    /// Everything written so far, to the file.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        if let Some(t) = &mut self.trace {
+            t.flush()?;
+        }
+        if let Some(c) = &mut self.csv {
+            c.flush()?;
+        }
+        Ok(())
+    }
+
+    /// The last records (the final state at `now`), flushed.
+    pub fn finish(&mut self, now: f64, ctl: &Controller, fixes: &[FixTiming]) -> std::io::Result<()> {
+        self.last_flush = f64::NEG_INFINITY;
+        self.update(now, ctl, fixes)
     }
 }

@@ -29,6 +29,8 @@ struct Feed {
     laser: bool,
     reports: bool,
     steering_fault: bool,
+    /// Scans keep coming but perception refuses each (a NaN angle increment).
+    refused_scans: bool,
 }
 
 const ALL: Feed = Feed {
@@ -36,6 +38,7 @@ const ALL: Feed = Feed {
     laser: true,
     reports: true,
     steering_fault: false,
+    refused_scans: false,
 };
 
 impl Rig {
@@ -106,7 +109,11 @@ impl Rig {
                 let scan = Scan {
                     stamp: now,
                     angle_min: -135f64.to_radians(),
-                    angle_increment: 0.5f64.to_radians(),
+                    angle_increment: if feed.refused_scans {
+                        f64::NAN
+                    } else {
+                        0.5f64.to_radians()
+                    },
                     range_min: 0.5,
                     range_max: 20.0,
                     ranges: &self.ranges,
@@ -233,6 +240,29 @@ fn laser_silence_stops_the_car() {
     );
     rig.assert_safe_stop(FaultReportCode::LaserSilent);
     rig.assert_limits();
+}
+
+/// Issue 11, finding 1: a NaN laser mounting made perception drop every scan while
+/// the watchdog was refreshed anyway, and the car drove blind into the post.
+#[test]
+fn scans_perception_refuses_count_as_laser_silence() {
+    let mut rig = Rig::new();
+    rig.drive();
+    let bad_before = rig.ctl.bad_scans;
+    rig.run(
+        1.0,
+        1.5,
+        Feed {
+            refused_scans: true,
+            ..ALL
+        },
+    );
+    assert!(rig.ctl.bad_scans > bad_before + 10, "{}", rig.ctl.bad_scans);
+    rig.assert_safe_stop(FaultReportCode::LaserSilent);
+    match rig.ctl.mode() {
+        Mode::Estop { reason, .. } => assert!(reason.contains("no laser scan"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]

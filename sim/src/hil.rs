@@ -450,14 +450,10 @@ pub fn run_hil(
         }
         if k % 20 == 0 {
             if let Some(c) = controller.as_deref_mut() {
+                // The run goes on until the car is safe, so the verdict can say how
+                // fast each ECU got there.
                 if let Ok(Some(exit)) = c.child.try_wait() {
-                    return Ok((
-                        Outcome::Stopped {
-                            time: sim.time(),
-                            reason: format!("the controller exited ({exit})"),
-                        },
-                        started,
-                    ));
+                    sim.controller_gone(format!("the controller exited ({exit})"));
                 }
             }
         }
@@ -567,7 +563,7 @@ pub fn run_scenario(
         toml::to_string_pretty(config)
             .map_err(|e| HilError::Setup(format!("encoding the controller configuration: {e}")))?,
     )?;
-    let trace_path = options.results.join("controller-trace.json");
+    let trace_path = options.results.join("controller-trace.jsonl");
     let _ = std::fs::remove_file(&trace_path);
     let mut controller = match &options.controller {
         Some(binary) => {
@@ -616,9 +612,16 @@ pub fn run_scenario(
     let trace = controller.as_mut().and_then(|c| {
         let exit = c.finish(Duration::from_secs(5));
         log(&format!("controller finished: {exit:?}"));
+        // Written while the controller ran: there even when it was killed.
         std::fs::read_to_string(&c.trace)
             .ok()
-            .and_then(|t| serde_json::from_str::<Trace>(&t).ok())
+            .and_then(|t| match Trace::from_jsonl(&t) {
+                Ok(trace) => Some(trace),
+                Err(e) => {
+                    log(&format!("the controller's trace {}: {e}", c.trace.display()));
+                    None
+                }
+            })
     });
     let (outcome, started_ns) = run?;
     let (lines, last) = wires.gps_input();
@@ -629,7 +632,7 @@ pub fn run_scenario(
     }
     let mut verdict = Verdict::judge("hil", sc, sim.report(outcome.clone()), trace.as_ref());
     verdict.fix_latency = trace.as_ref().and_then(|t| {
-        let epoch = crate::epoch::parse_rfc3339(&sc.sim.epoch).ok()?;
+        let epoch = sc.sim.epoch.unix_s();
         fix_latency(&t.fix_timing, epoch, started_ns)
     });
     verdict.wires = Some(wires.stats());

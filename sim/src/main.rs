@@ -27,7 +27,7 @@ use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
 use ugv_sim::ecu::station::run_standalone;
 use ugv_sim::hil::{self, HilOptions};
-use ugv_sim::mission::controller_config;
+use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::run::Snapshot;
 use ugv_sim::verdict::{Verdict, write_results};
 use ugv_sim::{Outcome, Scenario};
@@ -190,7 +190,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Check { scenarios } => {
             let mut failed = false;
             for path in scenarios {
-                match Scenario::load(&path) {
+                // The checks `run` makes before it starts anything.
+                let checked = Scenario::load(&path).map_err(anyhow::Error::from).and_then(|s| {
+                    checked_controller_config(&s, FollowerKind::Optimal, None)
+                        .map(|_| s)
+                        .map_err(|e| {
+                            anyhow::anyhow!(
+                                "{}: the controller's configuration for it: {e}",
+                                path.display()
+                            )
+                        })
+                });
+                match checked {
                     Ok(s) => println!(
                         "{}: ok ({}, {} obstacles)",
                         path.display(),
@@ -295,11 +306,8 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         );
         sc.sim.time_limit_s = limit;
     }
-    let mut cfg = controller_config(&sc, args.follower);
-    cfg.follower.anfis_model = args.anfis_model.clone();
-    cfg.validate().map_err(|(field, message)| {
-        anyhow::anyhow!("controller configuration: {field}: {message}")
-    })?;
+    let cfg = checked_controller_config(&sc, args.follower, args.anfis_model.clone())
+        .map_err(|e| anyhow::anyhow!("the controller's configuration for the scenario: {e}"))?;
     std::fs::create_dir_all(&args.results)
         .with_context(|| format!("creating {}", args.results.display()))?;
     eprintln!("ugv-sim: scenario {:?}: {}", sc.name, sc.description);

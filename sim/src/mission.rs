@@ -32,3 +32,17 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     cfg.follower.kind = follower;
     cfg
 }
+
+/// The controller configuration for a scenario with the follower (and ANFIS model) to
+/// use, checked exactly as the controller checks it: what `ugv-sim check` accepts,
+/// `run` and `suite` accept too.
+pub fn checked_controller_config(
+    scenario: &Scenario,
+    follower: FollowerKind,
+    anfis_model: Option<std::path::PathBuf>,
+) -> Result<ControllerConfig, ugv_fields::FieldError> {
+    let mut cfg = controller_config(scenario, follower);
+    cfg.follower.anfis_model = anfis_model;
+    cfg.validate()?;
+    Ok(cfg)
+}

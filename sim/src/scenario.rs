@@ -8,6 +8,10 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use ugv_fields::{
+    FieldError, FieldPath, LocatedError, angle_deg, coordinate, positive, positive_up_to, size,
+    within,
+};
 
 /// The paper's scenario, shipped embedded as the default.
 pub const PAPER_SCENARIO: &str = include_str!("../scenarios/paper.toml");
@@ -24,14 +28,10 @@ pub enum ScenarioError {
     /// Syntax errors and unknown or mistyped fields (the TOML error names line and column).
     #[error("{file}: {message}")]
     Parse { file: String, message: String },
-    /// A well-formed value that makes no sense (a negative radius, a goal inside a wall...).
-    #[error("{file}:{line}: {field}: {message}")]
-    Invalid {
-        file: String,
-        line: usize,
-        field: String,
-        message: String,
-    },
+    /// A well-formed value that makes no sense (a negative radius, a goal inside a
+    /// wall...), with the file and line it is on.
+    #[error(transparent)]
+    Invalid(#[from] LocatedError),
 }
 
 pub use firmware_bridge::geodesy::Datum;
@@ -242,8 +242,8 @@ pub struct SimConfig {
     pub physics_hz: f64,
     /// The run ends with a time-out verdict after this long, seconds.
     pub time_limit_s: f64,
-    /// UTC at t = 0, RFC 3339 (`2026-05-04T14:00:00Z`).
-    pub epoch: String,
+    /// UTC at t = 0, RFC 3339 (`2026-05-04T14:00:00Z`), parsed at load.
+    pub epoch: crate::epoch::Epoch,
     /// Seed of the noise sources (each source derives its own stream).
     pub seed: u64,
 }
@@ -253,7 +253,7 @@ impl Default for SimConfig {
         SimConfig {
             physics_hz: 200.0,
             time_limit_s: 60.0,
-            epoch: "2026-05-04T14:00:00Z".to_owned(),
+            epoch: crate::epoch::Epoch::default(),
             seed: 1,
         }
     }
@@ -331,99 +331,45 @@ impl Default for Scenario {
     }
 }
 
-/// A field that failed validation: its path (`obstacles[1].radius`) and why.
-struct Bad {
-    path: Vec<PathPart>,
-    message: String,
-}
-
-#[derive(Clone)]
-enum PathPart {
-    Key(&'static str),
-    Index(usize),
-}
-
-fn bad(path: &[PathPart], message: impl Into<String>) -> Bad {
-    Bad {
-        path: path.to_vec(),
-        message: message.into(),
-    }
-}
-
-fn path_text(path: &[PathPart]) -> String {
-    let mut s = String::new();
-    for p in path {
-        match p {
-            PathPart::Key(k) => {
-                if !s.is_empty() {
-                    s.push('.');
-                }
-                s.push_str(k);
-            }
-            PathPart::Index(i) => s.push_str(&format!("[{i}]")),
-        }
-    }
-    s
-}
-
-use PathPart::{Index, Key};
-
-fn finite(path: &[PathPart], v: f64) -> Result<(), Bad> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(bad(path, format!("{v} is not a finite number")))
-    }
-}
-
-fn positive(path: &[PathPart], v: f64) -> Result<(), Bad> {
-    finite(path, v)?;
-    if v > 0.0 {
-        Ok(())
-    } else {
-        Err(bad(path, format!("must be positive, is {v}")))
-    }
-}
-
-fn non_negative(path: &[PathPart], v: f64) -> Result<(), Bad> {
-    finite(path, v)?;
-    if v >= 0.0 {
-        Ok(())
-    } else {
-        Err(bad(path, format!("must not be negative, is {v}")))
-    }
-}
-
-fn with(path: &[PathPart], part: PathPart) -> Vec<PathPart> {
-    let mut p = path.to_vec();
-    p.push(part);
-    p
-}
-
-fn check_points(path: &[PathPart], points: &[[f64; 2]], min: usize) -> Result<(), Bad> {
+fn check_points(path: &FieldPath, points: &[[f64; 2]], min: usize) -> Result<(), FieldError> {
     if points.len() < min {
-        return Err(bad(
-            path,
+        return Err(FieldError::new(
+            path.clone(),
             format!("needs at least {min} points, has {}", points.len()),
         ));
     }
+    if points.len() > MAX_POINTS {
+        return Err(FieldError::new(
+            path.clone(),
+            format!("has {} points, at most {MAX_POINTS} are allowed", points.len()),
+        ));
+    }
     for (i, p) in points.iter().enumerate() {
-        finite(&with(path, Index(i)), p[0])?;
-        finite(&with(path, Index(i)), p[1])?;
+        coordinate(&path.index(i), p[0])?;
+        coordinate(&path.index(i), p[1])?;
     }
     Ok(())
 }
 
-fn check_motion(path: &[PathPart], motion: &Option<Motion>) -> Result<(), Bad> {
+/// Most obstacles in a scenario.
+const MAX_OBSTACLES: usize = 10_000;
+
+/// Most points of a wall or a waypoint path.
+const MAX_POINTS: usize = 10_000;
+
+/// The fastest an obstacle may move, m/s (a car on a course road, with room to spare).
+const MAX_OBSTACLE_SPEED: f64 = 50.0;
+
+fn check_motion(path: &FieldPath, motion: &Option<Motion>) -> Result<(), FieldError> {
     match motion {
         None => Ok(()),
         Some(Motion::Velocity { vx, vy }) => {
-            finite(&with(path, Key("vx")), *vx)?;
-            finite(&with(path, Key("vy")), *vy)
+            within(&path.key("vx"), *vx, -MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED, "m/s")?;
+            within(&path.key("vy"), *vy, -MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED, "m/s")
         }
         Some(Motion::Waypoints { points, speed, .. }) => {
-            check_points(&with(path, Key("points")), points, 2)?;
-            positive(&with(path, Key("speed")), *speed)
+            check_points(&path.key("points"), points, 2)?;
+            positive_up_to(&path.key("speed"), *speed, MAX_OBSTACLE_SPEED, "m/s")
         }
     }
 }
@@ -435,12 +381,7 @@ impl Scenario {
             file: file.to_owned(),
             message: e.to_string().trim_end().to_owned(),
         })?;
-        scenario.validate().map_err(|b| ScenarioError::Invalid {
-            file: file.to_owned(),
-            line: locate(text, &b.path),
-            field: path_text(&b.path),
-            message: b.message,
-        })?;
+        scenario.validate().map_err(|e| e.located(text, file))?;
         Ok(scenario)
     }
 
@@ -466,50 +407,49 @@ impl Scenario {
         }
     }
 
-    fn validate(&self) -> Result<(), Bad> {
+    /// The first field that makes no sense, and why: every number finite, of the
+    /// right sign and within plausible bounds (positions within
+    /// [`ugv_fields::PLAUSIBLE_COORDINATE`], so the physics' `f32` never sees an
+    /// infinity), the DBC's signal ranges where a value ends up on the bus, and the
+    /// start and goal usable.
+    fn validate(&self) -> Result<(), FieldError> {
+        let at = |keys: &[&'static str]| FieldPath::of(keys);
         let d = &self.datum;
-        if !(d.latitude.is_finite() && d.latitude.abs() <= 89.0) {
-            return Err(bad(
-                &[Key("datum"), Key("latitude")],
-                "must be within [-89, 89] degrees",
-            ));
-        }
-        if !(d.longitude.is_finite() && d.longitude.abs() <= 180.0) {
-            return Err(bad(
-                &[Key("datum"), Key("longitude")],
-                "must be within [-180, 180] degrees",
-            ));
-        }
-        finite(&[Key("datum"), Key("altitude")], d.altitude)?;
-        for (k, v) in [
-            ("x", self.start.x),
-            ("y", self.start.y),
-            ("heading_deg", self.start.heading_deg),
-        ] {
-            finite(&[Key("start"), Key(k)], v)?;
-        }
-        finite(&[Key("goal"), Key("x")], self.goal.x)?;
-        finite(&[Key("goal"), Key("y")], self.goal.y)?;
+        within(&at(&["datum", "latitude"]), d.latitude, -89.0, 89.0, "degrees")?;
+        within(&at(&["datum", "longitude"]), d.longitude, -180.0, 180.0, "degrees")?;
+        within(&at(&["datum", "altitude"]), d.altitude, -1_000.0, 10_000.0, "m")?;
+        coordinate(&at(&["start", "x"]), self.start.x)?;
+        coordinate(&at(&["start", "y"]), self.start.y)?;
+        angle_deg(&at(&["start", "heading_deg"]), self.start.heading_deg)?;
+        coordinate(&at(&["goal", "x"]), self.goal.x)?;
+        coordinate(&at(&["goal", "y"]), self.goal.y)?;
         if let Some(h) = self.goal.heading_deg {
-            finite(&[Key("goal"), Key("heading_deg")], h)?;
+            angle_deg(&at(&["goal", "heading_deg"]), h)?;
         }
-        positive(&[Key("goal"), Key("tolerance")], self.goal.tolerance)?;
+        positive_up_to(&at(&["goal", "tolerance"]), self.goal.tolerance, 50.0, "m")?;
+        // The controller's own rule (its mission.goal_x): a mission needs a way to go.
+        let distance = (self.goal.x - self.start.x).hypot(self.goal.y - self.start.y);
+        if distance < 1.0 {
+            return Err(FieldError::new(
+                at(&["goal"]),
+                format!("the goal must be at least 1 m from the start, is {distance:.2} m"),
+            ));
+        }
 
         let v = &self.vehicle;
-        let vp = |k| [Key("vehicle"), Key(k)];
+        let vp = |k: &'static str| at(&["vehicle", k]);
         for (k, x) in [
             ("wheelbase", v.wheelbase),
             ("length", v.length),
             ("width", v.width),
-            ("max_speed", v.max_speed),
             ("radius", v.radius),
         ] {
-            positive(&vp(k), x)?;
+            positive_up_to(&vp(k), x, 20.0, "m")?;
         }
-        non_negative(&vp("rear_overhang"), v.rear_overhang)?;
+        within(&vp("rear_overhang"), v.rear_overhang, 0.0, 20.0, "m")?;
         if v.rear_overhang + v.wheelbase > v.length {
-            return Err(bad(
-                &vp("wheelbase"),
+            return Err(FieldError::new(
+                vp("wheelbase"),
                 format!(
                     "rear_overhang {} + wheelbase {} exceed the length {}",
                     v.rear_overhang, v.wheelbase, v.length
@@ -517,89 +457,87 @@ impl Scenario {
             ));
         }
         if !(v.max_steer_deg > 0.0 && v.max_steer_deg < 60.0) {
-            return Err(bad(
-                &vp("max_steer_deg"),
+            return Err(FieldError::new(
+                vp("max_steer_deg"),
                 format!("must be in (0, 60), is {}", v.max_steer_deg),
             ));
         }
         // The DBC's ranges bound what can be commanded at all.
         if v.max_steer_deg > 45.0 {
-            return Err(bad(
-                &vp("max_steer_deg"),
+            return Err(FieldError::new(
+                vp("max_steer_deg"),
                 "exceeds the DBC's TargetAngle range of 45 degrees",
             ));
         }
+        positive(&vp("max_speed"), v.max_speed)?;
         if v.max_speed > 10.0 {
-            return Err(bad(
-                &vp("max_speed"),
+            return Err(FieldError::new(
+                vp("max_speed"),
                 "exceeds the DBC's TargetSpeed range of 10 m/s",
             ));
         }
 
         let s = &self.steering;
-        non_negative(&[Key("steering"), Key("dead_time_s")], s.dead_time_s)?;
-        positive(
-            &[Key("steering"), Key("time_constant_s")],
-            s.time_constant_s,
-        )?;
-        positive(&[Key("steering"), Key("max_rate_deg_s")], s.max_rate_deg_s)?;
-        non_negative(&[Key("steering"), Key("idle_current_a")], s.idle_current_a)?;
-        non_negative(
-            &[Key("steering"), Key("current_per_rate_a")],
-            s.current_per_rate_a,
-        )?;
-        finite(&[Key("steering"), Key("bias_deg")], s.bias_deg)?;
-        if s.bias_deg.abs() > 10.0 {
-            return Err(bad(
-                &[Key("steering"), Key("bias_deg")],
-                format!("must be within [-10, 10] degrees, is {}", s.bias_deg),
+        let sp = |k: &'static str| at(&["steering", k]);
+        within(&sp("dead_time_s"), s.dead_time_s, 0.0, 5.0, "s")?;
+        positive_up_to(&sp("time_constant_s"), s.time_constant_s, 10.0, "s")?;
+        positive_up_to(&sp("max_rate_deg_s"), s.max_rate_deg_s, 1_000.0, "deg/s")?;
+        // The DBC's MotorCurrent range.
+        within(&sp("idle_current_a"), s.idle_current_a, 0.0, 25.5, "A")?;
+        within(&sp("current_per_rate_a"), s.current_per_rate_a, 0.0, 10.0, "A per deg/s")?;
+        within(&sp("bias_deg"), s.bias_deg, -10.0, 10.0, "degrees")?;
+        let t = &self.throttle;
+        let tp = |k: &'static str| at(&["throttle", k]);
+        within(&tp("dead_time_s"), t.dead_time_s, 0.0, 5.0, "s")?;
+        positive_up_to(&tp("time_constant_s"), t.time_constant_s, 10.0, "s")?;
+        positive_up_to(&tp("max_accel"), t.max_accel, 20.0, "m/s^2")?;
+        positive_up_to(&tp("max_decel"), t.max_decel, 20.0, "m/s^2")?;
+        positive_up_to(&tp("brake_decel"), t.brake_decel, 20.0, "m/s^2")?;
+        within(&tp("throttle_per_speed"), t.throttle_per_speed, 0.0, 100.0, "% per m/s")?;
+        if self.can.interface.is_empty() || self.can.interface.len() > 15 {
+            return Err(FieldError::new(
+                at(&["can", "interface"]),
+                "must be 1 to 15 characters",
             ));
         }
-        let t = &self.throttle;
-        non_negative(&[Key("throttle"), Key("dead_time_s")], t.dead_time_s)?;
-        positive(
-            &[Key("throttle"), Key("time_constant_s")],
-            t.time_constant_s,
-        )?;
-        positive(&[Key("throttle"), Key("max_accel")], t.max_accel)?;
-        positive(&[Key("throttle"), Key("max_decel")], t.max_decel)?;
-        positive(&[Key("throttle"), Key("brake_decel")], t.brake_decel)?;
-        non_negative(
-            &[Key("throttle"), Key("throttle_per_speed")],
-            t.throttle_per_speed,
-        )?;
-        if self.can.interface.is_empty() || self.can.interface.len() > 15 {
-            return Err(bad(
-                &[Key("can"), Key("interface")],
-                "must be 1 to 15 characters",
+        if self.can.fault_clear_ms > 60_000 {
+            return Err(FieldError::new(
+                at(&["can", "fault_clear_ms"]),
+                format!("must be at most 60000 ms, is {}", self.can.fault_clear_ms),
             ));
         }
 
         self.gps
             .validate()
-            .map_err(|e| bad(&[Key("gps"), Key(e.field)], e.message))?;
+            .map_err(|e| FieldError::new(at(&["gps", e.field]), e.message))?;
         self.laser
             .validate()
-            .map_err(|e| bad(&[Key("laser"), Key(e.field)], e.message))?;
+            .map_err(|e| FieldError::new(at(&["laser", e.field]), e.message))?;
         self.devices
             .validate(&self.can.interface)
-            .map_err(|e| bad(&[Key("devices"), Key(e.path[0]), Key(e.path[1])], e.message))?;
+            .map_err(|e| device_field(&e))?;
         let sim = &self.sim;
-        if !(sim.physics_hz.is_finite() && (10.0..=2000.0).contains(&sim.physics_hz)) {
-            return Err(bad(
-                &[Key("sim"), Key("physics_hz")],
-                "must be within [10, 2000] Hz",
-            ));
-        }
-        positive(&[Key("sim"), Key("time_limit_s")], sim.time_limit_s)?;
-        crate::epoch::parse_rfc3339(&sim.epoch).map_err(|e| bad(&[Key("sim"), Key("epoch")], e))?;
-        non_negative(
-            &[Key("success"), Key("min_clearance")],
+        within(&at(&["sim", "physics_hz"]), sim.physics_hz, 10.0, 2000.0, "Hz")?;
+        positive_up_to(&at(&["sim", "time_limit_s"]), sim.time_limit_s, 86_400.0, "s")?;
+        within(
+            &at(&["success", "min_clearance"]),
             self.success.min_clearance,
+            0.0,
+            100.0,
+            "m",
         )?;
 
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(FieldError::new(
+                at(&["obstacles"]),
+                format!(
+                    "has {} obstacles, at most {MAX_OBSTACLES} are allowed",
+                    self.obstacles.len()
+                ),
+            ));
+        }
         for (i, o) in self.obstacles.iter().enumerate() {
-            let p = [Key("obstacles"), Index(i)];
+            let p = at(&["obstacles"]).index(i);
             match o {
                 Obstacle::Circle {
                     x,
@@ -607,10 +545,10 @@ impl Scenario {
                     radius,
                     motion,
                 } => {
-                    finite(&with(&p, Key("x")), *x)?;
-                    finite(&with(&p, Key("y")), *y)?;
-                    positive(&with(&p, Key("radius")), *radius)?;
-                    check_motion(&with(&p, Key("motion")), motion)?;
+                    coordinate(&p.key("x"), *x)?;
+                    coordinate(&p.key("y"), *y)?;
+                    size(&p.key("radius"), *radius)?;
+                    check_motion(&p.key("motion"), motion)?;
                 }
                 Obstacle::Box {
                     x,
@@ -620,20 +558,20 @@ impl Scenario {
                     heading_deg,
                     motion,
                 } => {
-                    finite(&with(&p, Key("x")), *x)?;
-                    finite(&with(&p, Key("y")), *y)?;
-                    positive(&with(&p, Key("length")), *length)?;
-                    positive(&with(&p, Key("width")), *width)?;
-                    finite(&with(&p, Key("heading_deg")), *heading_deg)?;
-                    check_motion(&with(&p, Key("motion")), motion)?;
+                    coordinate(&p.key("x"), *x)?;
+                    coordinate(&p.key("y"), *y)?;
+                    size(&p.key("length"), *length)?;
+                    size(&p.key("width"), *width)?;
+                    angle_deg(&p.key("heading_deg"), *heading_deg)?;
+                    check_motion(&p.key("motion"), motion)?;
                 }
                 Obstacle::Wall { points, thickness } => {
-                    check_points(&with(&p, Key("points")), points, 2)?;
-                    positive(&with(&p, Key("thickness")), *thickness)?;
+                    check_points(&p.key("points"), points, 2)?;
+                    size(&p.key("thickness"), *thickness)?;
                     for (j, w) in points.windows(2).enumerate() {
                         if w[0] == w[1] {
-                            return Err(bad(
-                                &with(&with(&p, Key("points")), Index(j + 1)),
+                            return Err(FieldError::new(
+                                p.key("points").index(j + 1),
                                 "repeats the previous point",
                             ));
                         }
@@ -646,23 +584,22 @@ impl Scenario {
         let world = crate::world::World::new(self);
         let start = crate::vehicle::VehicleState::at(&self.start);
         if let Some(i) = world.footprint_hits(&self.vehicle, &start).first() {
-            return Err(bad(
-                &[Key("start")],
+            return Err(FieldError::new(
+                at(&["start"]),
                 format!("the vehicle's footprint at the start overlaps obstacles[{i}]"),
             ));
         }
-        if self.success.reach_goal {
-            if let Some(i) = world
+        if self.success.reach_goal
+            && let Some(i) = world
                 .circle_hits(self.goal.x, self.goal.y, self.goal.tolerance.min(0.5))
                 .first()
-            {
-                return Err(bad(
-                    &[Key("goal")],
-                    format!(
-                        "the goal lies inside obstacles[{i}] at t = 0 but success.reach_goal is true"
-                    ),
-                ));
-            }
+        {
+            return Err(FieldError::new(
+                at(&["goal"]),
+                format!(
+                    "the goal lies inside obstacles[{i}] at t = 0 but success.reach_goal is true"
+                ),
+            ));
         }
         Ok(())
     }
@@ -674,40 +611,10 @@ pub(crate) fn invalid_device(
     file: &str,
     e: &crate::devices::map::DeviceError,
 ) -> ScenarioError {
-    let path = [Key("devices"), Key(e.path[0]), Key(e.path[1])];
-    ScenarioError::Invalid {
-        file: file.to_owned(),
-        line: locate(text, &path),
-        field: path_text(&path),
-        message: e.message.clone(),
-    }
+    ScenarioError::Invalid(device_field(e).located(text, file))
 }
 
-/// The 1-based line of a field in the TOML text (the nearest existing ancestor when
-/// the field itself is absent and came from the defaults).
-fn locate(text: &str, path: &[PathPart]) -> usize {
-    let Ok(root) = toml::de::DeTable::parse(text) else {
-        return 1;
-    };
-    let mut span = root.span();
-    let mut value: Option<&toml::de::DeValue<'_>> = None;
-    let mut table = Some(root.get_ref());
-    for part in path {
-        let next = match (part, table, value) {
-            (Key(k), Some(t), _) => t
-                .iter()
-                .find(|(key, _)| key.get_ref().as_ref() == *k)
-                .map(|(_, v)| v),
-            (Index(i), _, Some(toml::de::DeValue::Array(items))) => items.get(*i),
-            _ => None,
-        };
-        let Some(next) = next else { break };
-        span = next.span();
-        value = Some(next.get_ref());
-        table = match next.get_ref() {
-            toml::de::DeValue::Table(t) => Some(t),
-            _ => None,
-        };
-    }
-    text[..span.start.min(text.len())].matches('\n').count() + 1
+/// A device map error as a field error of the whole file.
+fn device_field(e: &crate::devices::map::DeviceError) -> FieldError {
+    FieldError::new(FieldPath::of(&["devices", e.path[0], e.path[1]]), e.message.clone())
 }

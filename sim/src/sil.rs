@@ -4,10 +4,11 @@
 //! a seed, far faster than real time.
 
 use firmware_bridge::can::membus::{MemBus, MemEndpoint};
-use firmware_bridge::nmea::{NmeaReader, ReadEvent, ReaderConfig};
+use firmware_bridge::nmea::ReaderConfig;
 use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError, scan_of};
+use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError};
+use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
 use ugv_controller::trace::Trace;
 
 use crate::run::{Outcome, Sim, SimError};
@@ -34,10 +35,35 @@ pub struct SilRun {
     pub sim: Sim<MemEndpoint>,
     pub outcome: Outcome,
     pub trace: Trace,
+    /// How the controller's loop ended, if it did before the run.
+    pub controller_exit: Option<Exit>,
+    /// What its ports delivered that it could not use.
+    pub inputs: InputStats,
+}
+
+/// The controller as SIL runs it: the library's loop on memory ports.
+pub type SilController = Runtime<MemGps, MemLaser, MemEndpoint>;
+
+/// What a [`run_sil_with`] hook lets happen to the controller next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hook {
+    Continue,
+    /// The controller's process dies here (SIGKILL): it is never stepped again.
+    Kill,
 }
 
 /// Run `scenario` with the controller configured by `cfg`, in lockstep.
 pub fn run_sil(scenario: Scenario, cfg: &ControllerConfig) -> Result<SilRun, SilError> {
+    run_sil_with(scenario, cfg, |_, _| Hook::Continue)
+}
+
+/// [`run_sil`] with `hook` called before every controller tick with its time and the
+/// controller on its ports (to close a port, push bad input, or kill the controller).
+pub fn run_sil_with(
+    scenario: Scenario,
+    cfg: &ControllerConfig,
+    mut hook: impl FnMut(f64, &mut SilController) -> Hook,
+) -> Result<SilRun, SilError> {
     if !scenario.devices.all_simulated() {
         return Err(SilError::PhysicalDevice(format!("{:?}", scenario.devices)));
     }
@@ -48,45 +74,53 @@ pub fn run_sil(scenario: Scenario, cfg: &ControllerConfig) -> Result<SilRun, Sil
         CanPort::new(bus.endpoint(), "sil"),
     )
     .with_sensors()?;
-    let mut ctl_port = CanPort::new(bus.endpoint(), "sil");
-    let mut ctl = Controller::new(cfg)?;
-    let mut reader = NmeaReader::new(ReaderConfig {
+    let gps = MemGps::new(ReaderConfig {
         complete_when: scenario.gps.sentence_set(),
         ..ReaderConfig::default()
     });
+    // The controller on memory ports, run by the same loop as the binary's.
+    let mut rt = Runtime::new(
+        Controller::new(cfg)?,
+        gps,
+        MemLaser::default(),
+        CanPort::new(bus.endpoint(), "sil"),
+    );
     let dt = sim.dt();
     let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
+    let mut exit = None;
+    let mut gone = false;
     let outcome = loop {
         let k = sim.next_tick();
         let now = k as f64 * dt;
         let outcome = sim.step(now, 0.0)?;
         let out = sim.take_outputs();
         if let Some(epoch) = out.gps {
-            for event in reader.feed(epoch.text.as_bytes()) {
-                if let ReadEvent::Fix(r) = event {
-                    ctl.on_gps(now, &r);
-                }
-            }
+            rt.gps_mut().push(epoch.text.as_bytes());
         }
         if let Some(frame) = out.laser {
-            ctl.on_scan(now, &scan_of(&frame, now));
+            rt.laser_mut().push(frame);
         }
-        if k % control_every == 0 {
-            while let Some(r) = ctl_port.try_recv() {
-                ctl.on_can(now, &r);
-            }
-            for m in ctl.tick(now) {
-                ctl_port.send_message(&m)?;
+        // Once the loop has ended the controller is gone, as its process would be.
+        if !gone && k % control_every == 0 {
+            if hook(now, &mut rt) == Hook::Kill {
+                gone = true;
+                sim.controller_gone("the controller was killed".to_owned());
+            } else if let Some(e) = rt.step(now) {
+                gone = true;
+                sim.controller_gone(format!("the controller's loop ended ({})", e.describe()));
+                exit = Some(e);
             }
         }
         if let Some(o) = outcome {
             break o;
         }
     };
-    let trace = Trace::of(&ctl, sim.time());
+    let trace = rt.trace(sim.time());
     Ok(SilRun {
         sim,
         outcome,
         trace,
+        controller_exit: exit,
+        inputs: rt.stats.clone(),
     })
 }

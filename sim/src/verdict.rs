@@ -112,6 +112,22 @@ impl Verdict {
         if let Outcome::Stopped { reason, .. } = &report.outcome {
             failures.push(format!("stopped: {reason}"));
         }
+        if let Some(s) = &report.safe_state {
+            for (name, e) in [("steering", &s.steering), ("throttle", &s.throttle)] {
+                if !e.within_bound {
+                    failures.push(match e.latency_ms {
+                        Some(l) => format!(
+                            "the {name} ECU reported its safe state {l:.1} ms after its last command, beyond its {:.0} ms",
+                            e.bound_ms
+                        ),
+                        None => format!("the {name} ECU never reported its safe state"),
+                    });
+                }
+            }
+            if s.stopped_s.is_none() {
+                failures.push("the car did not stop after the controller went away".to_owned());
+            }
+        }
         let controller = trace.map(|t| ControllerSummary {
             mode: serde_json::to_value(&t.mode).unwrap_or_default(),
             tracking_error_rms: t.tracking_error_rms,

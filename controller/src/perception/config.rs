@@ -138,6 +138,9 @@ impl Default for PerceptionConfig {
     }
 }
 
+/// The largest magnitude any tuning value may have.
+const PLAUSIBLE_LIMIT: f64 = 10_000.0;
+
 fn invalid(field: &'static str, message: impl Into<String>) -> PerceptionError {
     PerceptionError::InvalidConfig {
         field,
@@ -172,6 +175,54 @@ impl PerceptionConfig {
     pub fn validate(&self) -> Result<(), PerceptionError> {
         positive("detection_radius", self.detection_radius)?;
         positive("moving_detection_radius", self.moving_detection_radius)?;
+        // No tuning value is anywhere near this: larger ones are typing errors (and
+        // beyond f32 they turn into infinities in the laser's single precision).
+        for (field, v) in [
+            ("detection_radius", self.detection_radius),
+            ("moving_detection_radius", self.moving_detection_radius),
+            ("range_noise_sigma", self.range_noise_sigma),
+            ("breakpoint_lambda_deg", self.breakpoint_lambda_deg),
+            ("breakpoint_noise_factor", self.breakpoint_noise_factor),
+            ("circle_radius_min", self.circle_radius_min),
+            ("circle_radius_max", self.circle_radius_max),
+            ("circle_rms_max", self.circle_rms_max),
+            ("circle_line_ratio", self.circle_line_ratio),
+            ("segment_min_length", self.segment_min_length),
+            ("split_distance", self.split_distance),
+            ("blob_min_radius", self.blob_min_radius),
+            ("wall_circle_min_radius", self.wall_circle_min_radius),
+            ("wall_circle_margin", self.wall_circle_margin),
+            ("vehicle_radius", self.vehicle_radius),
+            ("wall_angle_gate_deg", self.wall_angle_gate_deg),
+            ("wall_offset_gate", self.wall_offset_gate),
+            ("wall_gap_gate", self.wall_gap_gate),
+            ("gate_chi2", self.gate_chi2),
+            ("gate_min_distance", self.gate_min_distance),
+            ("gate_max_distance", self.gate_max_distance),
+            ("accel_noise", self.accel_noise),
+            ("position_sigma_min", self.position_sigma_min),
+            ("initial_velocity_sigma", self.initial_velocity_sigma),
+            ("radius_process_sigma", self.radius_process_sigma),
+            ("velocity_dead_band", self.velocity_dead_band),
+            ("velocity_significance_chi2", self.velocity_significance_chi2),
+            ("moving_confirm_s", self.moving_confirm_s),
+        ] {
+            if v.abs() > PLAUSIBLE_LIMIT {
+                return Err(invalid(
+                    field,
+                    format!("must be at most {PLAUSIBLE_LIMIT} in magnitude, got {v}"),
+                ));
+            }
+        }
+        // The longest-range 2D scanners reach 80 m (LMS291).
+        for (field, v) in [
+            ("detection_radius", self.detection_radius),
+            ("moving_detection_radius", self.moving_detection_radius),
+        ] {
+            if v > 100.0 {
+                return Err(invalid(field, format!("must be at most 100 m, got {v}")));
+            }
+        }
         non_negative("moving_confirm_s", self.moving_confirm_s)?;
         positive("range_noise_sigma", self.range_noise_sigma)?;
         if !(self.breakpoint_lambda_deg > 0.0 && self.breakpoint_lambda_deg < 90.0) {

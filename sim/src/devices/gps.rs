@@ -77,8 +77,6 @@ pub enum GpsError {
         field: &'static str,
         message: String,
     },
-    #[error("sim.epoch: {0}")]
-    Epoch(String),
     #[error("datum: {0}")]
     Datum(#[from] GeodesyError),
     #[error("sim time {0} is not a finite number")]
@@ -160,7 +158,7 @@ impl GpsDevice {
             frame,
             datum_altitude_m: datum.altitude,
             wheelbase_m,
-            clock: UtcClock::new(utc_of(&sim.epoch)?),
+            clock: UtcClock::new(sim.epoch.utc()),
             writer: NmeaWriter::new(config.writer_config())?,
             noise: ErrorModel::new(sim.seed),
             next_index: 0,
@@ -332,15 +330,3 @@ impl GpsDevice {
     }
 }
 
-/// UTC of an RFC 3339 time (the scenario's `sim.epoch`).
-pub fn utc_of(rfc3339: &str) -> Result<DateTime<Utc>, GpsError> {
-    let secs = crate::epoch::parse_rfc3339(rfc3339).map_err(GpsError::Epoch)?;
-    let whole = secs.floor();
-    // Microseconds: an f64 of seconds since 1970 carries no finer digits.
-    let nanos = ((secs - whole) * 1e6).round().clamp(0.0, 999_999.0) as u32 * 1000;
-    if !(whole.is_finite() && whole.abs() < 1e15) {
-        return Err(GpsError::Epoch(format!("{rfc3339:?} is out of range")));
-    }
-    DateTime::from_timestamp(whole as i64, nanos)
-        .ok_or_else(|| GpsError::Epoch(format!("{rfc3339:?} is out of range")))
-}

@@ -327,8 +327,6 @@ pub enum LaserDeviceError {
         field: &'static str,
         message: String,
     },
-    #[error("sim.epoch: {0}")]
-    Epoch(String),
 }
 
 impl From<FieldError> for LaserDeviceError {
@@ -413,18 +411,7 @@ impl LaserDevice {
 
     /// The scanner of a scenario: its `[laser]`, obstacles, `sim.seed` and `sim.epoch`.
     pub fn from_scenario(scenario: &Scenario) -> Result<LaserDevice, LaserDeviceError> {
-        let epoch_s =
-            crate::epoch::parse_rfc3339(&scenario.sim.epoch).map_err(LaserDeviceError::Epoch)?;
-        if !(epoch_s.is_finite() && epoch_s >= 0.0) {
-            return Err(LaserDeviceError::Epoch(format!(
-                "{} is before 1970",
-                scenario.sim.epoch
-            )));
-        }
-        let secs = epoch_s.floor();
-        let epoch_ns = (secs as u64)
-            .saturating_mul(1_000_000_000)
-            .saturating_add(((epoch_s - secs) * 1e9).round() as u64);
+        let epoch_ns = scenario.sim.epoch.unix_ns();
         LaserDevice::new(
             &scenario.laser,
             &scenario.obstacles,

@@ -1,0 +1,485 @@
+//! The controller's loop: the one piece of code that runs the controller on its three
+//! ports, for the binary on the wall clock and the real wires (serial GPS, iceoryx2
+//! laser, SocketCAN) and for SIL on the lockstep clock and memory ports.
+//!
+//! Every 10 ms tick takes the inputs in one order (CAN reports, then GPS bytes, then
+//! laser frames), runs [`Controller::tick`] and sends its messages. What can go wrong
+//! on a port is one of two things ([`InputError`]): a malformed input (a sentence that
+//! fails its checksum, a frame of another version) is counted and skipped; a port that
+//! is gone (the GPS device closed, the shared-memory service broken) is a fault: the
+//! controller estops (estop heartbeat, FAULT_REPORT, both ECUs commanded disabled) and
+//! keeps telling the bus so for [`LOST_PORT_GRACE`] before the loop ends. The trace
+//! goes out while the loop runs ([`TraceWriter`]), so whatever ends the process leaves
+//! it on disk.
+
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use chrono::Timelike;
+use firmware_bridge::clock::{Clock, monotonic_ns};
+use firmware_bridge::laser::{LaserError, LaserFrame, LaserSubscriber};
+use firmware_bridge::nmea::{NmeaError, NmeaLink, NmeaReader, ReadEvent, ReaderConfig};
+use firmware_bridge::{BridgeError, CanPort};
+use golf_car_can::{
+    ControllerHeartbeat, ControllerHeartbeatState, FaultReportCode, GolfCarMessage,
+};
+use serde::Serialize;
+
+use crate::core::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
+use crate::trace::{FixTiming, Trace, TraceWriter};
+
+/// How long a controller that lost a port keeps sending its estop before the loop
+/// ends, seconds: several heartbeat and FAULT_REPORT periods, and longer than the
+/// ECUs' 100 ms command timeout, so they are in their safe state by the estop, not by
+/// the silence that follows.
+pub const LOST_PORT_GRACE: f64 = 0.5;
+
+/// How long the loop sends estop heartbeats after a stop was requested, seconds.
+pub const STOP_GRACE: f64 = 0.1;
+
+/// Most laser frames taken in one tick (a backlog after a stall drains over a few
+/// ticks; a flood cannot hold the loop).
+const MAX_FRAMES_PER_TICK: usize = 16;
+
+/// What went wrong on an input port.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InputError {
+    /// One input was malformed; the port goes on.
+    #[error("malformed input: {0}")]
+    Malformed(String),
+    /// The port is gone.
+    #[error("port lost: {0}")]
+    Lost(String),
+}
+
+/// The GPS port: NMEA bytes in, readings out, never blocking.
+pub trait GpsInput {
+    /// The events completed by what the port has now.
+    fn poll(&mut self) -> Result<Vec<ReadEvent>, InputError>;
+}
+
+/// The laser port: validated frames, oldest first, never blocking.
+pub trait LaserInput {
+    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError>;
+}
+
+impl<P: Read + Write> GpsInput for NmeaLink<P> {
+    fn poll(&mut self) -> Result<Vec<ReadEvent>, InputError> {
+        NmeaLink::poll(self).map_err(|e| match e {
+            NmeaError::Io { .. } => InputError::Lost(e.to_string()),
+            other => InputError::Malformed(other.to_string()),
+        })
+    }
+}
+
+impl LaserInput for LaserSubscriber {
+    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError> {
+        LaserSubscriber::try_recv(self).map_err(|e| match e {
+            LaserError::Ipc { .. } | LaserError::ServiceName { .. } => {
+                InputError::Lost(e.to_string())
+            }
+            other => InputError::Malformed(other.to_string()),
+        })
+    }
+}
+
+/// A GPS port in memory (SIL): bytes pushed in are read by the NMEA reader at the next
+/// poll, exactly as the binary reads its serial port.
+#[derive(Debug)]
+pub struct MemGps {
+    reader: NmeaReader,
+    pending: Vec<u8>,
+    lost: Option<String>,
+}
+
+impl MemGps {
+    pub fn new(config: ReaderConfig) -> MemGps {
+        MemGps {
+            reader: NmeaReader::new(config),
+            pending: Vec::new(),
+            lost: None,
+        }
+    }
+
+    /// Bytes that arrived on the line.
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.pending.extend_from_slice(bytes);
+    }
+
+    /// The port goes away (the cable pulled): the next poll reports it lost.
+    pub fn close(&mut self, why: &str) {
+        self.lost = Some(why.to_owned());
+    }
+}
+
+impl GpsInput for MemGps {
+    fn poll(&mut self) -> Result<Vec<ReadEvent>, InputError> {
+        if let Some(why) = &self.lost {
+            return Err(InputError::Lost(why.clone()));
+        }
+        let events = self.reader.feed(&self.pending).collect();
+        self.pending.clear();
+        Ok(events)
+    }
+}
+
+/// A laser port in memory (SIL): frames are validated when taken, as the iceoryx2
+/// subscriber does.
+#[derive(Debug, Default)]
+pub struct MemLaser {
+    frames: VecDeque<Box<LaserFrame>>,
+    lost: Option<String>,
+}
+
+impl MemLaser {
+    pub fn push(&mut self, frame: Box<LaserFrame>) {
+        self.frames.push_back(frame);
+    }
+
+    /// The service goes away: the next receive reports it lost.
+    pub fn close(&mut self, why: &str) {
+        self.lost = Some(why.to_owned());
+    }
+}
+
+impl LaserInput for MemLaser {
+    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError> {
+        if let Some(why) = &self.lost {
+            return Err(InputError::Lost(why.clone()));
+        }
+        match self.frames.pop_front() {
+            None => Ok(None),
+            Some(f) => f
+                .validate()
+                .map(|()| Some(*f))
+                .map_err(|e| InputError::Malformed(e.to_string())),
+        }
+    }
+}
+
+/// Why the loop ended.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "exit", rename_all = "snake_case")]
+pub enum Exit {
+    /// The mission is complete: arrived and stopped.
+    Finished,
+    /// A port was lost; the estop went out for [`LOST_PORT_GRACE`].
+    PortLost { reason: String },
+    /// A stop was requested (a signal) while in estop.
+    StoppedInEstop,
+    /// A stop was requested (a signal).
+    Stopped,
+    /// The CAN port failed: nothing more can be said to the ECUs, whose command
+    /// timeouts take them to their safe state.
+    CanLost { reason: String },
+}
+
+impl Exit {
+    /// In words, for logs and verdicts.
+    pub fn describe(&self) -> String {
+        match self {
+            Exit::Finished => "mission complete".to_owned(),
+            Exit::PortLost { reason } => format!("safety stop: {reason}"),
+            Exit::StoppedInEstop => "stopped in estop".to_owned(),
+            Exit::Stopped => "stopped".to_owned(),
+            Exit::CanLost { reason } => format!("CAN lost: {reason}"),
+        }
+    }
+
+    /// The binary's exit code: 0 mission complete, 1 safety stop, 3 ended by a
+    /// signal, 4 error.
+    pub fn code(&self) -> u8 {
+        match self {
+            Exit::Finished => 0,
+            Exit::PortLost { .. } | Exit::StoppedInEstop => 1,
+            Exit::Stopped => 3,
+            Exit::CanLost { .. } => 4,
+        }
+    }
+}
+
+/// What the ports delivered that could not be used.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct InputStats {
+    /// GPS reads that failed without losing the port.
+    pub gps_errors: u64,
+    /// Laser frames refused at the port (validation).
+    pub laser_frames_refused: u64,
+    /// The last such error, for the log.
+    pub last_error: Option<String>,
+}
+
+/// The loop's state while it winds down.
+#[derive(Clone, Debug)]
+struct Closing {
+    until: f64,
+    exit: Exit,
+    /// Estop heartbeats only (a requested stop), instead of the controller's messages.
+    heartbeats_only: bool,
+}
+
+/// The controller on its ports.
+#[derive(Debug)]
+pub struct Runtime<G, L, B> {
+    ctl: Controller,
+    gps: G,
+    laser: L,
+    can: CanPort<B>,
+    gps_lost: bool,
+    laser_lost: bool,
+    closing: Option<Closing>,
+    next_heartbeat: f64,
+    trace: Option<TraceWriter>,
+    trace_error: Option<String>,
+    /// Fix timings on the monotonic clock (the binary on the wires), when kept.
+    fix_timing: Option<Vec<FixTiming>>,
+    unanswered: Vec<(f64, u64)>,
+    pub stats: InputStats,
+}
+
+impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
+    pub fn new(ctl: Controller, gps: G, laser: L, can: CanPort<B>) -> Self {
+        Runtime {
+            ctl,
+            gps,
+            laser,
+            can,
+            gps_lost: false,
+            laser_lost: false,
+            closing: None,
+            next_heartbeat: 0.0,
+            trace: None,
+            trace_error: None,
+            fix_timing: None,
+            unanswered: Vec::new(),
+            stats: InputStats::default(),
+        }
+    }
+
+    /// Write the trace as the run goes.
+    pub fn with_trace(mut self, writer: TraceWriter) -> Self {
+        self.trace = Some(writer);
+        self
+    }
+
+    /// Stamp each fix's read and the first steering command after it on the
+    /// machine's monotonic clock (HIL latency figures; not deterministic, so not SIL).
+    pub fn with_fix_timing(mut self) -> Self {
+        self.fix_timing = Some(Vec::new());
+        self
+    }
+
+    pub fn controller(&self) -> &Controller {
+        &self.ctl
+    }
+
+    pub fn can(&self) -> &CanPort<B> {
+        &self.can
+    }
+
+    pub fn gps_mut(&mut self) -> &mut G {
+        &mut self.gps
+    }
+
+    pub fn laser_mut(&mut self) -> &mut L {
+        &mut self.laser
+    }
+
+    /// The first error writing the trace, if any (the run goes on without it).
+    pub fn trace_error(&self) -> Option<&str> {
+        self.trace_error.as_deref()
+    }
+
+    /// End the run: estop heartbeats for [`STOP_GRACE`] from `now`, then the loop ends.
+    pub fn request_stop(&mut self, now: f64) {
+        if self.closing.is_none() {
+            let exit = if matches!(self.ctl.mode(), Mode::Estop { .. }) {
+                Exit::StoppedInEstop
+            } else {
+                Exit::Stopped
+            };
+            self.closing = Some(Closing {
+                until: now + STOP_GRACE,
+                exit,
+                heartbeats_only: true,
+            });
+            self.next_heartbeat = now;
+        }
+    }
+
+    fn lost(&mut self, now: f64, code: FaultReportCode, reason: String) {
+        self.ctl.fail(code, reason.clone());
+        if self.closing.is_none() {
+            self.closing = Some(Closing {
+                until: now + LOST_PORT_GRACE,
+                exit: Exit::PortLost { reason },
+                heartbeats_only: false,
+            });
+        }
+    }
+
+    fn note(&mut self, e: &InputError) {
+        let mut text = e.to_string();
+        text.truncate(200);
+        self.stats.last_error = Some(text);
+    }
+
+    fn read_inputs(&mut self, now: f64) {
+        while let Some(r) = self.can.try_recv() {
+            self.ctl.on_can(now, &r);
+        }
+        if !self.gps_lost {
+            match self.gps.poll() {
+                Ok(events) => {
+                    for event in events {
+                        if let ReadEvent::Fix(reading) = event {
+                            if let (Some(_), Some(t)) = (&self.fix_timing, reading.time) {
+                                self.unanswered.push((
+                                    f64::from(t.num_seconds_from_midnight())
+                                        + f64::from(t.nanosecond()) * 1e-9,
+                                    monotonic_ns(),
+                                ));
+                            }
+                            self.ctl.on_gps(now, &reading);
+                        }
+                    }
+                }
+                Err(e @ InputError::Malformed(_)) => {
+                    self.stats.gps_errors += 1;
+                    self.note(&e);
+                }
+                Err(InputError::Lost(why)) => {
+                    self.gps_lost = true;
+                    self.lost(now, FaultReportCode::GpsLost, format!("GPS port lost: {why}"));
+                }
+            }
+        }
+        if !self.laser_lost {
+            for _ in 0..MAX_FRAMES_PER_TICK {
+                match self.laser.try_recv() {
+                    Ok(Some(frame)) => self.ctl.on_scan(now, &scan_of(&frame, now)),
+                    Ok(None) => break,
+                    Err(e @ InputError::Malformed(_)) => {
+                        self.stats.laser_frames_refused += 1;
+                        self.note(&e);
+                    }
+                    Err(InputError::Lost(why)) => {
+                        self.laser_lost = true;
+                        self.lost(
+                            now,
+                            FaultReportCode::LaserSilent,
+                            format!("laser port lost: {why}"),
+                        );
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    fn send(&mut self, m: &GolfCarMessage) -> Result<(), BridgeError> {
+        self.can.send_message(m)?;
+        if matches!(m, GolfCarMessage::SteeringCmd(_))
+            && let Some(timing) = &mut self.fix_timing
+        {
+            let sent = monotonic_ns();
+            timing.extend(self.unanswered.drain(..).map(|(utc_s, read_ns)| FixTiming {
+                utc_s,
+                read_ns,
+                command_ns: sent,
+            }));
+        }
+        Ok(())
+    }
+
+    fn write_trace(&mut self, now: f64, last: bool) {
+        let fixes = self.fix_timing.as_deref().unwrap_or(&[]);
+        if let Some(w) = &mut self.trace {
+            let r = if last {
+                w.finish(now, &self.ctl, fixes)
+            } else {
+                w.update(now, &self.ctl, fixes)
+            };
+            if let Err(e) = r {
+                // A full disk must not stop the car's control: log once, go on.
+                if self.trace_error.is_none() {
+                    self.trace_error = Some(e.to_string());
+                }
+                self.trace = None;
+            }
+        }
+    }
+
+    /// One tick at controller time `now`: inputs, the controller, outputs, the trace.
+    /// `Some` when the loop has ended (the trace is then complete).
+    pub fn step(&mut self, now: f64) -> Option<Exit> {
+        if let Some(c) = &self.closing
+            && now + 1e-9 >= c.until
+        {
+            let exit = c.exit.clone();
+            self.write_trace(now, true);
+            return Some(exit);
+        }
+        self.read_inputs(now);
+        let messages = self.ctl.tick(now);
+        let heartbeats_only = self.closing.as_ref().is_some_and(|c| c.heartbeats_only);
+        let out: Vec<GolfCarMessage> = if heartbeats_only {
+            let mut v = Vec::new();
+            if now + 1e-9 >= self.next_heartbeat {
+                v.push(GolfCarMessage::ControllerHeartbeat(ControllerHeartbeat {
+                    state: ControllerHeartbeatState::Estop,
+                }));
+                self.next_heartbeat =
+                    firmware_bridge::clock::next_slot(self.next_heartbeat, now, HEARTBEAT_PERIOD);
+            }
+            v
+        } else {
+            messages
+        };
+        for m in &out {
+            if let Err(e) = self.send(m) {
+                self.write_trace(now, true);
+                return Some(Exit::CanLost {
+                    reason: e.to_string(),
+                });
+            }
+        }
+        if self.ctl.finished() && self.closing.is_none() {
+            self.write_trace(now, true);
+            return Some(Exit::Finished);
+        }
+        self.write_trace(now, false);
+        None
+    }
+
+    /// Run on `clock` (ticks of [`COMMAND_PERIOD`]) until the loop ends; `stop` asks it
+    /// to end (a signal); `status` is called after every tick with the tick's index.
+    pub fn run<C: Clock>(
+        &mut self,
+        clock: &mut C,
+        stop: &AtomicBool,
+        mut status: impl FnMut(u64, f64, &Runtime<G, L, B>),
+    ) -> Exit {
+        let mut k: u64 = 0;
+        loop {
+            clock.wait_tick(k);
+            let now = k as f64 * COMMAND_PERIOD;
+            k += 1;
+            if stop.load(Ordering::Relaxed) {
+                self.request_stop(now);
+            }
+            if let Some(exit) = self.step(now) {
+                return exit;
+            }
+            status(k, now, self);
+        }
+    }
+
+    /// The run's trace (in memory), with the fix timings kept, over `duration`.
+    pub fn trace(&self, duration: f64) -> Trace {
+        let mut t = Trace::of(&self.ctl, duration);
+        t.fix_timing = self.fix_timing.clone().unwrap_or_default();
+        t
+    }
+}

@@ -1,0 +1,126 @@
+//! The controller's configuration is range-checked at load, every field of it, with
+//! the file, line and field named (issue 11, finding 1: a NaN laser yaw passed
+//! `check-config` and `run`, and the car drove the paper scenario blind).
+
+use ugv_controller::config::{ConfigError, ControllerConfig};
+use ugv_controller::core::{Controller, ControllerError};
+
+/// Every floating-point field of the configuration, as its dotted path.
+fn float_fields() -> Vec<Vec<String>> {
+    fn walk(prefix: &[String], table: &toml::Table, out: &mut Vec<Vec<String>>) {
+        for (k, v) in table {
+            let mut path = prefix.to_vec();
+            path.push(k.clone());
+            match v {
+                toml::Value::Float(_) => out.push(path),
+                toml::Value::Table(t) => walk(&path, t, out),
+                _ => {}
+            }
+        }
+    }
+    let text = toml::to_string(&ControllerConfig::default()).expect("default encodes");
+    let table: toml::Table = toml::from_str(&text).expect("default decodes");
+    let mut out = Vec::new();
+    walk(&[], &table, &mut out);
+    out
+}
+
+/// A file that sets `path` to `value` (a TOML literal) on line 3.
+fn file_setting(path: &[String], value: &str) -> String {
+    let (key, tables) = path.split_last().expect("a path");
+    format!("# test\n[{}]\n{key} = {value}\n", tables.join("."))
+}
+
+fn refused(text: &str) -> ugv_fields::LocatedError {
+    match ControllerConfig::from_toml(text, "c.toml") {
+        Err(ConfigError::Invalid(e)) => e,
+        other => panic!("expected a refusal of\n{text}\ngot {other:?}"),
+    }
+}
+
+#[test]
+fn every_float_field_refuses_nan_and_infinities_naming_file_line_and_field() {
+    let fields = float_fields();
+    assert!(fields.len() > 60, "found only {} fields", fields.len());
+    let mut wrong = Vec::new();
+    for path in &fields {
+        for value in ["nan", "inf", "-inf"] {
+            let text = file_setting(path, value);
+            let e = refused(&text);
+            if (e.file.as_str(), e.field.clone(), e.line) != ("c.toml", path.join("."), 3) {
+                wrong.push(format!("{} = {value}: {e}", path.join(".")));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+#[test]
+fn every_float_field_refuses_values_beyond_f32() {
+    // 1e39 is finite in f64 and infinite in f32; 1e300 far beyond any plausible bound.
+    let mut wrong = Vec::new();
+    for path in float_fields() {
+        for value in ["1e39", "-1e39", "1e300"] {
+            let text = file_setting(&path, value);
+            let e = refused(&text);
+            if e.field != path.join(".") {
+                wrong.push(format!("{} = {value}: {e}", path.join(".")));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+#[test]
+fn the_fields_named_in_the_issue_are_refused() {
+    for (section, key, value) in [
+        ("vehicle", "laser_yaw_deg", "nan"),
+        ("vehicle", "steer_rate_deg_s", "nan"),
+        ("vehicle", "steer_rate_deg_s", "inf"),
+        ("follower", "accel_limit", "nan"),
+        ("planner", "final_approach", "inf"),
+        ("follower", "max_lateral_accel", "nan"),
+        ("planner", "safety_margin", "-0.5"),
+    ] {
+        let text = format!("[{section}]\n{key} = {value}\n");
+        let e = refused(&text);
+        assert_eq!(e.field, format!("{section}.{key}"));
+        assert_eq!(e.line, 2);
+        assert!(e.to_string().starts_with(&format!("c.toml:2: {section}.{key}: ")), "{e}");
+    }
+}
+
+#[test]
+fn array_elements_are_named_by_index() {
+    let e = refused("[planner]\npace_fractions = [1.0, 0.5, nan]\n");
+    assert_eq!(e.field, "planner.pace_fractions[2]");
+    assert_eq!(e.line, 2);
+}
+
+#[test]
+fn perception_tuning_is_checked_at_load_as_the_controller_checks_it() {
+    // Perception's own checks ran only when `run` built the controller, so
+    // `check-config` passed files `run` refused.
+    let e = refused("[perception]\nmin_points = 0\n");
+    assert_eq!(e.field, "perception.min_points");
+    assert_eq!(e.line, 2);
+    let e = refused("[perception]\ndetection_radius = 1000\n");
+    assert_eq!(e.field, "perception.detection_radius");
+}
+
+#[test]
+fn the_controller_refuses_a_configuration_that_bypassed_the_loader() {
+    let mut cfg = ControllerConfig::default();
+    cfg.vehicle.laser_yaw_deg = f64::NAN;
+    match Controller::new(&cfg) {
+        Err(ControllerError::Config(e)) => assert_eq!(e.path.to_string(), "vehicle.laser_yaw_deg"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn the_default_configuration_and_a_full_file_pass() {
+    ControllerConfig::default().validate().expect("the default is valid");
+    let text = toml::to_string(&ControllerConfig::default()).expect("encodes");
+    ControllerConfig::from_toml(&text, "full.toml").expect("the default written out is valid");
+}
