@@ -5,6 +5,12 @@
 //!
 //! [`protect`] builds a protected frame and [`check`] checks one; [`E2eTx`] and
 //! [`E2eRx`] keep the per-ID counter state and the receiver's rejection counts.
+//!
+//! E2E proves integrity, not origin: any process that can open the interface can send
+//! a well-formed frame with the next counter. What it cannot do is keep the genuine
+//! sender quiet, so a second sender shows on the counter stream: [`SenderWatch`]
+//! looks for the counter patterns one sender with lost frames cannot produce, and
+//! [`E2eRx`] runs one per stream ([`E2eRx::second_sender`], [`E2eStats::second_sender`]).
 
 use std::collections::BTreeMap;
 
@@ -151,6 +157,70 @@ impl E2eTx {
     }
 }
 
+/// What the counter check made of one frame of a stream (a frame with a good CRC).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CounterVerdict {
+    /// The next counter (or the first frame of the stream): accepted.
+    Next,
+    /// The last accepted counter again.
+    Repeated,
+    /// Neither: one or more frames missing, or another sequence.
+    Skipped,
+}
+
+/// The frames of one stream [`SenderWatch`] looks back over.
+pub const SENDER_WINDOW: u32 = 32;
+/// Repeated counters within the window that reveal a second sender.
+pub const SENDER_REPEATS: u32 = 3;
+/// Counter anomalies (repeated or skipped) within the window that reveal one.
+pub const SENDER_ANOMALIES: u32 = 8;
+// The window is the bits of the watch's masks.
+const _: () = assert!(SENDER_WINDOW == u32::BITS);
+
+/// Second-sender detection on one counter stream (one ID, or one `Source` of a
+/// message with several senders).
+///
+/// One sender never repeats its counter: a lost frame makes a skip, and since the
+/// receiver re-synchronises on a skip, a burst of lost frames costs one skip, not one
+/// per frame. A second sender on the stream does what loss cannot: one that answers
+/// each genuine frame with a forged one carrying the next counter makes every genuine
+/// frame a repeat; one with a sequence of its own makes nearly every frame a skip. So
+/// within the last [`SENDER_WINDOW`] frames, [`SENDER_REPEATS`] repeated counters or
+/// [`SENDER_ANOMALIES`] anomalies of either kind flag the stream; it stays flagged
+/// until they have left the window. An occasional lost frame (or a rare double
+/// reception) never gets there: it takes a quarter of the frames lost, in separate
+/// bursts, to reach eight skips.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SenderWatch {
+    /// One bit per frame, newest lowest: anomalies, and the repeats among them.
+    anomalies: u32,
+    repeats: u32,
+    flagged: bool,
+}
+
+impl SenderWatch {
+    /// Take one frame's verdict; true when it made the stream flagged (the moment a
+    /// second sender is found, counted once per episode).
+    pub fn observe(&mut self, verdict: CounterVerdict) -> bool {
+        let (anomaly, repeat) = match verdict {
+            CounterVerdict::Next => (0, 0),
+            CounterVerdict::Repeated => (1, 1),
+            CounterVerdict::Skipped => (1, 0),
+        };
+        self.anomalies = (self.anomalies << 1) | anomaly;
+        self.repeats = (self.repeats << 1) | repeat;
+        let was = self.flagged;
+        self.flagged = self.repeats.count_ones() >= SENDER_REPEATS
+            || self.anomalies.count_ones() >= SENDER_ANOMALIES;
+        self.flagged && !was
+    }
+
+    /// Whether the stream shows a second sender now.
+    pub fn flagged(&self) -> bool {
+        self.flagged
+    }
+}
+
 /// What a receiver accepted and rejected, by cause.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct E2eStats {
@@ -161,6 +231,9 @@ pub struct E2eStats {
     pub bad_crc: u64,
     pub repeated_counter: u64,
     pub skipped_counter: u64,
+    /// Times a stream was found to have a second sender ([`SenderWatch`]); not a
+    /// rejection count (the frames are counted above).
+    pub second_sender: u64,
 }
 
 impl E2eStats {
@@ -195,11 +268,12 @@ impl E2eStats {
 /// signal, and each sender keeps its own counter, so the receiver tracks one counter
 /// per (ID, Source). A skipped counter is rejected and counted, and the receiver
 /// re-synchronises on it, so the frame after it is accepted again; a repeated counter
-/// or a bad CRC leaves the state as it was.
+/// or a bad CRC leaves the state as it was. Each stream has a [`SenderWatch`].
 #[derive(Debug, Clone)]
 pub struct E2eRx<'n> {
     network: &'n NetworkSpec,
     last: BTreeMap<(u16, i128), u8>,
+    watch: BTreeMap<(u16, i128), SenderWatch>,
     stats: E2eStats,
 }
 
@@ -219,6 +293,7 @@ impl<'n> E2eRx<'n> {
         Self {
             network,
             last: BTreeMap::new(),
+            watch: BTreeMap::new(),
             stats: E2eStats::default(),
         }
     }
@@ -246,8 +321,28 @@ impl<'n> E2eRx<'n> {
             }
             _ => {}
         }
+        let verdict = match &result {
+            Ok(_) => Some(CounterVerdict::Next),
+            Err(E2eError::RepeatedCounter { .. }) => Some(CounterVerdict::Repeated),
+            Err(E2eError::SkippedCounter { .. }) => Some(CounterVerdict::Skipped),
+            Err(_) => None,
+        };
+        if let (Some(verdict), Some(k)) = (verdict, key) {
+            if self.watch.entry(k).or_default().observe(verdict) {
+                self.stats.second_sender += 1;
+            }
+        }
         self.stats.count(&result);
         result
+    }
+
+    /// The CAN ID of a stream that shows a second sender now (the lowest, when
+    /// several do), see [`SenderWatch`].
+    pub fn second_sender(&self) -> Option<u16> {
+        self.watch
+            .iter()
+            .find(|(_, w)| w.flagged())
+            .map(|((id, _), _)| *id)
     }
 
     /// Check a frame of any `embedded_can` implementation.
@@ -266,5 +361,166 @@ impl<'n> E2eRx<'n> {
     /// Forget the counter history (after a bus-off or a deliberate restart).
     pub fn reset(&mut self) {
         self.last.clear();
+        self.watch.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{CanMessage, NETWORK, SteeringCmd};
+
+    /// splitmix64, so a failure reproduces.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        fn chance(&mut self, p: f64) -> bool {
+            ((self.next() >> 11) as f64 / (1u64 << 53) as f64) < p
+        }
+    }
+
+    fn frame(counter: u8, target: f64) -> Payload {
+        let mut data = SteeringCmd {
+            enable: true,
+            target_angle: target,
+            max_rate: 50.0,
+        }
+        .encode()
+        .unwrap_or_default();
+        protect(SteeringCmd::ID, &mut data, counter);
+        data
+    }
+
+    fn feed(rx: &mut E2eRx<'_>, data: &Payload) -> Result<(u16, Payload), E2eError> {
+        rx.accept_parts(u32::from(SteeringCmd::ID), false, false, data)
+    }
+
+    #[test]
+    fn a_forger_answering_each_frame_with_the_next_counter_is_found_within_eight_frames() {
+        let mut rx = E2eRx::new(&NETWORK);
+        let mut found_after = None;
+        for k in 0..100u8 {
+            // The genuine frame, then the forged one with the next counter.
+            let _ = feed(&mut rx, &frame(k % 16, 1.0));
+            let _ = feed(&mut rx, &frame((k + 1) % 16, 35.0));
+            if found_after.is_none() && rx.second_sender().is_some() {
+                found_after = Some(2 * (usize::from(k) + 1));
+            }
+        }
+        let frames = found_after.unwrap_or(usize::MAX);
+        assert!(frames <= 8, "found after {frames} frames");
+        assert_eq!(rx.second_sender(), Some(SteeringCmd::ID));
+        let s = rx.stats();
+        assert_eq!(s.second_sender, 1, "one episode, counted once: {s:?}");
+        assert!(s.repeated_counter >= 95, "{s:?}");
+    }
+
+    #[test]
+    fn an_interleaved_sequence_of_its_own_is_found() {
+        let mut rx = E2eRx::new(&NETWORK);
+        for k in 0..20u8 {
+            let _ = feed(&mut rx, &frame(k % 16, 1.0));
+            let _ = feed(&mut rx, &frame((k + 7) % 16, 35.0));
+        }
+        assert_eq!(rx.second_sender(), Some(SteeringCmd::ID));
+        assert!(rx.stats().skipped_counter >= 30, "{:?}", rx.stats());
+    }
+
+    #[test]
+    fn a_flag_clears_once_the_second_sender_has_gone() {
+        let mut rx = E2eRx::new(&NETWORK);
+        let mut c = 0u8;
+        for _ in 0..10 {
+            let _ = feed(&mut rx, &frame(c, 1.0));
+            c = (c + 1) % 16;
+            let _ = feed(&mut rx, &frame(c, 35.0));
+        }
+        assert!(rx.second_sender().is_some());
+        // The genuine sender alone, resynchronised: the anomalies leave the window.
+        for _ in 0..SENDER_WINDOW {
+            c = (c + 1) % 16;
+            let _ = feed(&mut rx, &frame(c, 1.0));
+        }
+        assert_eq!(rx.second_sender(), None);
+        assert_eq!(rx.stats().second_sender, 1);
+    }
+
+    #[test]
+    fn one_sender_with_occasional_loss_bursts_and_a_double_reception_is_never_flagged() {
+        let mut rx = E2eRx::new(&NETWORK);
+        let mut rng = Rng(0x5EED_E2E5);
+        let mut counter = 0u8;
+        let mut delivered = 0u64;
+        // 200 000 frames (over half an hour at 100 Hz): 2 % lost singly, bursts of up
+        // to 20 lost now and then, and a double reception (CAN's EOF case) now and then.
+        for _ in 0..200_000 {
+            let data = frame(counter, 1.0);
+            counter = (counter + 1) % 16;
+            if rng.chance(0.02) {
+                continue;
+            }
+            if rng.chance(0.001) {
+                for _ in 0..(rng.next() % 20) {
+                    counter = (counter + 1) % 16;
+                }
+            }
+            let _ = feed(&mut rx, &data);
+            delivered += 1;
+            if rng.chance(0.0005) {
+                let _ = feed(&mut rx, &data);
+            }
+            assert_eq!(
+                rx.second_sender(),
+                None,
+                "after {delivered} frames: {:?}",
+                rx.stats()
+            );
+        }
+        let s = rx.stats();
+        assert_eq!(s.second_sender, 0, "{s:?}");
+        assert!(
+            s.skipped_counter > 2_000 && s.repeated_counter > 20,
+            "{s:?}"
+        );
+    }
+
+    #[test]
+    fn the_watch_counts_patterns_not_single_events() {
+        let mut w = SenderWatch::default();
+        // Two repeats in a window: not yet (a double reception twice is possible).
+        assert!(!w.observe(CounterVerdict::Repeated));
+        assert!(!w.observe(CounterVerdict::Next));
+        assert!(!w.observe(CounterVerdict::Repeated));
+        assert!(!w.flagged());
+        assert!(
+            w.observe(CounterVerdict::Repeated),
+            "the third repeat flags"
+        );
+        assert!(
+            !w.observe(CounterVerdict::Repeated),
+            "flagged once per episode"
+        );
+        assert!(w.flagged());
+        // Seven skips in a window do not flag; the eighth does.
+        let mut w = SenderWatch::default();
+        for _ in 0..SENDER_ANOMALIES - 1 {
+            assert!(!w.observe(CounterVerdict::Skipped));
+            assert!(!w.observe(CounterVerdict::Next));
+        }
+        assert!(w.observe(CounterVerdict::Skipped));
+        // Skips spread wider than the window never flag.
+        let mut w = SenderWatch::default();
+        for _ in 0..1000 {
+            assert!(!w.observe(CounterVerdict::Skipped));
+            for _ in 0..4 {
+                assert!(!w.observe(CounterVerdict::Next));
+            }
+        }
     }
 }

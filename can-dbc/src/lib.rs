@@ -16,7 +16,7 @@ mod generated {
 }
 
 pub use codec::Payload;
-pub use e2e::{E2eError, E2eRx, E2eStats, E2eTx};
+pub use e2e::{CounterVerdict, E2eError, E2eRx, E2eStats, E2eTx, SenderWatch};
 pub use generated::*;
 pub use spec::{MessageSpec, NetworkSpec, SignalSpec, SpecError};
 

@@ -177,6 +177,12 @@ where
         self.rx.stats()
     }
 
+    /// The CAN ID of a counter stream that shows a second sender now
+    /// (`golf_car_can::SenderWatch`), if any.
+    pub fn second_sender(&self) -> Option<u16> {
+        self.rx.second_sender()
+    }
+
     /// Frames that passed E2E but did not decode.
     pub fn undecodable(&self) -> u64 {
         self.undecodable

@@ -94,8 +94,8 @@ pub struct NodeStats {
     pub bus_errors: u64,
     pub sent: u64,
     /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
-    /// fault report (the simulated ECU's; zero for a physical one).
-    pub safe_state_trips: [u64; 4],
+    /// fault report, second sender (the simulated ECU's; zero for a physical one).
+    pub safe_state_trips: [u64; 5],
     /// Reports received from the physical ECU (absent when the ECU is simulated).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub physical_reports: Option<u64>,

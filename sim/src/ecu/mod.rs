@@ -8,8 +8,8 @@ pub mod steering;
 pub mod throttle;
 
 use golf_car_can::{
-    CanMessage, FaultReport, FaultReportSource, GolfCarMessage, NETWORK, SteeringReport,
-    ThrottleReport,
+    CanMessage, FaultReport, FaultReportCode, FaultReportSource, GolfCarMessage, NETWORK,
+    SteeringReport, ThrottleReport,
 };
 
 use crate::scenario::Scenario;
@@ -60,6 +60,8 @@ pub struct EcuNode {
     next_fault: f64,
     /// Frames the node ignored (not addressed to it: other reports, its own kind).
     pub ignored: u64,
+    /// The CAN ID of the last stream seen with a second sender (FAULT_REPORT detail).
+    second_sender: Option<u16>,
 }
 
 impl EcuNode {
@@ -81,6 +83,7 @@ impl EcuNode {
             next_report: 0.0,
             next_fault: 0.0,
             ignored: 0,
+            second_sender: None,
         }
     }
 
@@ -119,6 +122,13 @@ impl EcuNode {
         }
     }
 
+    /// The receiver found a second sender on the stream of CAN ID `id`: the safe state
+    /// and a FAULT_REPORT (second_sender, detail `id`) while it lasts.
+    pub fn on_second_sender(&mut self, now: f64, id: u16) {
+        self.second_sender = Some(id);
+        self.safety().on_second_sender(now);
+    }
+
     /// Move the actuator by `dt` ending at `now`.
     pub fn step(&mut self, now: f64, dt: f64) {
         match &mut self.ecu {
@@ -148,9 +158,10 @@ impl EcuNode {
         let own = self.safety_ref().fault().and_then(|c| c.own_fault_code());
         match own {
             Some(code) if now + 1e-9 >= self.next_fault => {
-                let detail = match self.ecu {
-                    Ecu::Steering(_) => golf_car_can::SteeringCmd::ID,
-                    Ecu::Throttle(_) => golf_car_can::ThrottleCmd::ID,
+                let detail = match (code, self.second_sender, &self.ecu) {
+                    (FaultReportCode::SecondSender, Some(id), _) => id,
+                    (_, _, Ecu::Steering(_)) => golf_car_can::SteeringCmd::ID,
+                    (_, _, Ecu::Throttle(_)) => golf_car_can::ThrottleCmd::ID,
                 };
                 out.push(GolfCarMessage::FaultReport(FaultReport {
                     source: self.source(),

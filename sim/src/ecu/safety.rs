@@ -1,7 +1,9 @@
 //! The ECUs' common enable/disable state machine, watchdog and safe state (DESIGN.md):
 //! an ECU whose commands or the heartbeat time out, or that sees an estop or any
 //! FAULT_REPORT, disables; it re-enables only on an explicit enable (a 0 to 1 edge of
-//! the command's enable bit) after the fault has cleared.
+//! the command's enable bit) after the fault has cleared. So does one that sees a
+//! second sender on a counter stream (golf_car_can::SenderWatch): someone other than
+//! the controller is commanding it.
 
 use golf_car_can::{ControllerHeartbeatState, FaultReportCode};
 
@@ -13,6 +15,8 @@ pub enum Cause {
     HeartbeatTimeout,
     Estop,
     FaultReport,
+    /// A second sender on a counter stream the ECU receives.
+    SecondSender,
 }
 
 impl Cause {
@@ -22,6 +26,7 @@ impl Cause {
         match self {
             Cause::CommandTimeout => Some(FaultReportCode::CommandTimeout),
             Cause::HeartbeatTimeout => Some(FaultReportCode::HeartbeatTimeout),
+            Cause::SecondSender => Some(FaultReportCode::SecondSender),
             Cause::Estop | Cause::FaultReport => None,
         }
     }
@@ -32,7 +37,8 @@ impl Cause {
 pub struct SafetyTiming {
     pub command_timeout: f64,
     pub heartbeat_timeout: f64,
-    /// How long without a FAULT_REPORT before another node's fault counts as cleared.
+    /// How long without a FAULT_REPORT before another node's fault counts as cleared
+    /// (and how long a second sender must have gone before its fault clears).
     pub fault_clear: f64,
 }
 
@@ -43,11 +49,12 @@ pub struct Safety {
     last_command: Option<f64>,
     last_heartbeat: Option<(f64, ControllerHeartbeatState)>,
     last_fault_report: Option<f64>,
+    last_second_sender: Option<f64>,
     enable_bit: bool,
     enabled: bool,
     latched: Option<Cause>,
     /// Times the safe state was entered, by cause order above.
-    pub trips: [u64; 4],
+    pub trips: [u64; 5],
 }
 
 impl Safety {
@@ -57,10 +64,11 @@ impl Safety {
             last_command: None,
             last_heartbeat: None,
             last_fault_report: None,
+            last_second_sender: None,
             enable_bit: false,
             enabled: false,
             latched: None,
-            trips: [0; 4],
+            trips: [0; 5],
         }
     }
 
@@ -85,6 +93,12 @@ impl Safety {
     /// A FAULT_REPORT from another node.
     pub fn on_fault_report(&mut self, now: f64) {
         self.last_fault_report = Some(now);
+        self.update(now);
+    }
+
+    /// A counter stream shows a second sender now.
+    pub fn on_second_sender(&mut self, now: f64) {
+        self.last_second_sender = Some(now);
         self.update(now);
     }
 
@@ -115,6 +129,9 @@ impl Safety {
                         .is_some_and(|(_, s)| s == ControllerHeartbeatState::Estop)
             }
             Cause::FaultReport => Self::fresh(self.last_fault_report, now, self.timing.fault_clear),
+            Cause::SecondSender => {
+                Self::fresh(self.last_second_sender, now, self.timing.fault_clear)
+            }
             Cause::HeartbeatTimeout => driven && !heartbeat_fresh,
             Cause::CommandTimeout => {
                 driven && !Self::fresh(self.last_command, now, self.timing.command_timeout)
@@ -126,7 +143,8 @@ impl Safety {
     /// holds, so the report says why the ECU tripped), clear it when no condition is
     /// left, disable when the controller leaves auto.
     pub fn update(&mut self, now: f64) {
-        const ORDER: [Cause; 4] = [
+        const ORDER: [Cause; 5] = [
+            Cause::SecondSender,
             Cause::Estop,
             Cause::FaultReport,
             Cause::HeartbeatTimeout,
@@ -236,6 +254,39 @@ mod tests {
             Some(Cause::HeartbeatTimeout),
             "both stopped: heartbeat first"
         );
+    }
+
+    #[test]
+    fn a_second_sender_trips_the_safe_state_until_it_has_gone() {
+        let mut s = Safety::new(timing());
+        drive(&mut s, 0.0, 0.02, false);
+        drive(&mut s, 0.02, 0.2, true);
+        assert!(s.enabled());
+        s.on_second_sender(0.2);
+        assert!(!s.enabled());
+        assert_eq!(s.fault(), Some(Cause::SecondSender));
+        assert_eq!(
+            Cause::SecondSender.own_fault_code(),
+            Some(FaultReportCode::SecondSender)
+        );
+        // While the stream is flagged, even enable edges with a heartbeat in auto (a
+        // forger can send both) do not re-enable.
+        let mut t = 0.21;
+        let mut enable = false;
+        while t < 0.6 {
+            s.on_second_sender(t);
+            s.on_heartbeat(t, Auto);
+            s.on_command(t, enable);
+            enable = !enable;
+            assert!(!s.enabled(), "t = {t}");
+            t += 0.01;
+        }
+        // Gone for longer than fault_clear: the fault clears, and an edge re-enables.
+        drive(&mut s, 0.6, 0.9, false);
+        assert_eq!(s.fault(), None);
+        drive(&mut s, 0.9, 0.95, true);
+        assert!(s.enabled());
+        assert_eq!(s.trips[Cause::SecondSender as usize], 1);
     }
 
     #[test]

@@ -80,7 +80,8 @@ impl<B: Can> Station<B> {
         }
     }
 
-    /// Take every frame waiting on the bus.
+    /// Take every frame waiting on the bus. A simulated ECU whose receiver sees a
+    /// second sender on any counter stream goes to its safe state.
     pub fn drain(&mut self, now: f64) {
         while let Some(r) = self.port.try_recv() {
             if let Received::Message(m) = r {
@@ -89,6 +90,9 @@ impl<B: Can> Station<B> {
                     Twin::Physical(reported) => reported.handle(self.kind, &m),
                 }
             }
+        }
+        if let (Twin::Simulated(node), Some(id)) = (&mut self.twin, self.port.second_sender()) {
+            node.on_second_sender(now, id);
         }
     }
 
@@ -128,7 +132,7 @@ impl<B: Can> Station<B> {
             sent: self.sent,
             safe_state_trips: match &self.twin {
                 Twin::Simulated(node) => node.safety_ref().trips,
-                Twin::Physical(_) => [0; 4],
+                Twin::Physical(_) => [0; 5],
             },
             physical_reports: match &self.twin {
                 Twin::Simulated(_) => None,
@@ -212,4 +216,150 @@ pub fn run_standalone<B: Can>(
         k += 1;
     }
     Ok(snapshot(&station, k.saturating_sub(1) as f64 * dt))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use firmware_bridge::can::membus::{MemBus, MemEndpoint};
+    use golf_car_can::e2e::{counter_of, protect};
+    use golf_car_can::{
+        CanMessage, ControllerHeartbeat, ControllerHeartbeatState, FaultReport, FaultReportCode,
+        SteeringCmd,
+    };
+
+    use crate::ecu::safety::Cause;
+
+    /// A steering station on a memory bus with a controller's endpoint and a spare one
+    /// (a forger's), stepped at 200 Hz with a heartbeat every 20 ms and a command every
+    /// 10 ms (`send` says whether each command reaches the bus).
+    struct Bench {
+        station: Station<MemEndpoint>,
+        controller: CanPort<MemEndpoint>,
+        forger: CanPort<MemEndpoint>,
+        k: u64,
+        /// Every message the controller received.
+        seen: Vec<GolfCarMessage>,
+    }
+
+    impl Bench {
+        fn new() -> Bench {
+            let bus = MemBus::new();
+            let scenario = Scenario::default();
+            Bench {
+                station: Station::new(
+                    EcuKind::Steering,
+                    &EcuDevice::Simulated {},
+                    &scenario,
+                    CanPort::new(bus.endpoint(), "mem"),
+                ),
+                controller: CanPort::new(bus.endpoint(), "mem"),
+                forger: CanPort::new(bus.endpoint(), "mem"),
+                k: 0,
+                seen: Vec::new(),
+            }
+        }
+
+        /// Step 5 ms; `command` is the controller's STEERING_CMD of this step (sent
+        /// on even steps), `forge` answers it with the next counter and 35 degrees.
+        fn step(&mut self, send_command: bool, forge: bool) {
+            let now = self.k as f64 * 0.005;
+            if self.k % 4 == 0 {
+                let _ = self.controller.send(&ControllerHeartbeat {
+                    state: ControllerHeartbeatState::Auto,
+                });
+            }
+            if self.k % 2 == 0 {
+                let cmd = SteeringCmd {
+                    enable: now > 0.05,
+                    target_angle: 2.0,
+                    max_rate: 0.0,
+                };
+                // The controller's counter advances whether or not the frame arrives.
+                let mut data = cmd.encode().unwrap_or_default();
+                let counter = ((self.k / 2) % 16) as u8;
+                protect(SteeringCmd::ID, &mut data, counter);
+                if send_command {
+                    let _ = self.controller.send_payload(SteeringCmd::ID, &data);
+                }
+                if forge {
+                    let mut forged = SteeringCmd {
+                        target_angle: 35.0,
+                        ..cmd
+                    }
+                    .encode()
+                    .unwrap_or_default();
+                    protect(SteeringCmd::ID, &mut forged, counter_of(&data) + 1);
+                    let _ = self.forger.send_payload(SteeringCmd::ID, &forged);
+                }
+            }
+            self.station.drain(now);
+            self.station.step(now, 0.005);
+            let _ = self.station.send_due(now, now);
+            while let Some(r) = self.controller.try_recv() {
+                if let Received::Message(m) = r {
+                    self.seen.push(m);
+                }
+            }
+            while self.forger.try_recv().is_some() {}
+            self.k += 1;
+        }
+
+        fn fault_reports(&self) -> Vec<FaultReport> {
+            self.seen
+                .iter()
+                .filter_map(|m| match m {
+                    GolfCarMessage::FaultReport(f) => Some(*f),
+                    _ => None,
+                })
+                .collect()
+        }
+    }
+
+    #[test]
+    fn a_forger_answering_each_command_puts_the_steering_ecu_in_its_safe_state() {
+        let mut b = Bench::new();
+        for _ in 0..200 {
+            b.step(true, false);
+        }
+        assert!(b.station.state().0, "enabled before the forger");
+        let before = b.station.actuator().0.to_degrees();
+        for _ in 0..100 {
+            b.step(true, true);
+        }
+        let (enabled, fault) = b.station.state();
+        assert!(!enabled);
+        assert_eq!(fault, Some(Cause::SecondSender));
+        let stats = b.station.stats();
+        assert_eq!(stats.e2e.second_sender, 1, "{stats:?}");
+        assert_eq!(stats.safe_state_trips[Cause::SecondSender as usize], 1);
+        // Found within a few frames: the wheels barely moved towards the forged 35 deg.
+        let angle = b.station.actuator().0.to_degrees();
+        assert!(angle - before < 3.0, "{before} -> {angle}");
+        let reports = b.fault_reports();
+        assert!(
+            reports
+                .iter()
+                .any(|f| f.code == FaultReportCode::SecondSender && f.detail == SteeringCmd::ID),
+            "{reports:?}"
+        );
+    }
+
+    #[test]
+    fn occasional_lost_commands_never_trip_the_second_sender_fault() {
+        let mut b = Bench::new();
+        // 30 s: one command in 25 lost, and a burst of 8 lost (80 ms, under the
+        // command timeout) every 5 s.
+        for k in 0..6000u64 {
+            let lost = (k / 2) % 25 == 7 || (500..516).contains(&(k % 1000));
+            b.step(!lost, false);
+            if k > 100 {
+                assert!(b.station.state().0, "step {k}: {:?}", b.station.state());
+            }
+        }
+        let stats = b.station.stats();
+        assert_eq!(stats.e2e.second_sender, 0, "{stats:?}");
+        assert!(stats.e2e.skipped_counter > 100, "{stats:?}");
+        assert!(b.fault_reports().is_empty());
+    }
 }

@@ -108,6 +108,7 @@ impl SteeringEcu {
                 Some(Cause::HeartbeatTimeout) => SteeringReportFault::HeartbeatTimeout,
                 Some(Cause::Estop) => SteeringReportFault::Estop,
                 Some(Cause::FaultReport) => SteeringReportFault::FaultReport,
+                Some(Cause::SecondSender) => SteeringReportFault::SecondSender,
             },
             angle: self.angle_deg.clamp(-45.0, 45.0),
             rate: self.rate_deg_s.clamp(-500.0, 500.0),

@@ -153,6 +153,7 @@ impl ThrottleEcu {
                 Some(Cause::HeartbeatTimeout) => ThrottleReportFault::HeartbeatTimeout,
                 Some(Cause::Estop) => ThrottleReportFault::Estop,
                 Some(Cause::FaultReport) => ThrottleReportFault::FaultReport,
+                Some(Cause::SecondSender) => ThrottleReportFault::SecondSender,
             },
             wheel_speed: self.speed.clamp(-10.0, 10.0),
             throttle: self.throttle_pct,
