@@ -142,6 +142,13 @@ use crate::laser::LaserError;
 /// The TCP port of CoLa-A on SICK scanners.
 pub const DEFAULT_PORT: u16 = 2111;
 
+/// Where an emulated scanner listens unless told otherwise: `127.0.0.1:2111`, loopback
+/// only. CoLa-A has no encryption and SICK's passwords are public, so listening on
+/// another interface is for a network you trust, and must be asked for.
+pub const DEFAULT_LISTEN: std::net::SocketAddr = std::net::SocketAddr::V4(
+    std::net::SocketAddrV4::new(std::net::Ipv4Addr::LOCALHOST, DEFAULT_PORT),
+);
+
 /// Password hash of the "authorized client" user level (level 3) of SICK scanners,
 /// the one drivers log in with (`sMN SetAccessMode 03 F4724744`).
 pub const AUTHORIZED_CLIENT_PASSWORD: u32 = 0xF472_4744;

@@ -12,7 +12,7 @@
 //! steering = { mode = "physical", can = "can0" }        # the real steering ECU on can0
 //! throttle = { mode = "simulated" }                     # the default
 //! gps = { mode = "serial", device = "/dev/ttyUSB0", baud = 115200, peer = "/dev/ttyUSB1" }
-//! laser = { mode = "cola", listen = "0.0.0.0:2111" }     # served as a SICK over TCP
+//! laser = { mode = "cola", listen = "127.0.0.1:2111" }   # served as a SICK over TCP
 //! controller = { mode = "board", can = "can0" }          # the controller on its own board
 //! ```
 
@@ -89,11 +89,14 @@ impl Default for GpsOutput {
 pub enum LaserSource {
     /// The simulated scans go straight onto the run's iceoryx2 service.
     Iceoryx2 {},
-    /// The simulated laser is served as a SICK CoLa-A device on TCP at `listen`; with
-    /// `driver` (the default) the simulator also runs the CoLa-A driver that puts the
-    /// scans on the run's iceoryx2 service, as `ugv-sick` does for a real scanner.
-    /// Without it, bring your own SICK driver.
+    /// The simulated laser is served as a SICK CoLa-A device on TCP at `listen`
+    /// (default `127.0.0.1:2111`, loopback only: give an interface's own address to
+    /// serve a driver on another machine, on a network you trust); with `driver` (the
+    /// default) the simulator also runs the CoLa-A driver that puts the scans on the
+    /// run's iceoryx2 service, as `ugv-sick` does for a real scanner, and holds the
+    /// scanner's one login. Without it, bring your own SICK driver.
     Cola {
+        #[serde(default = "loopback_sick")]
         listen: SocketAddr,
         #[serde(default = "yes")]
         driver: bool,
@@ -111,6 +114,10 @@ impl Default for LaserSource {
 
 fn yes() -> bool {
     true
+}
+
+fn loopback_sick() -> SocketAddr {
+    firmware_bridge::cola::DEFAULT_LISTEN
 }
 
 /// The device map of a run.
@@ -301,6 +308,18 @@ controller = { mode = "board", can = "can0" }
             parse("[devices]\nlaser = { mode = \"physical\", address = \"192.168.0.1:2111\" }\n")
                 .unwrap();
         assert!(matches!(physical.laser, LaserSource::Physical { .. }));
+    }
+
+    #[test]
+    fn the_cola_laser_listens_on_loopback_by_default() {
+        let map = parse("[devices]\nlaser = { mode = \"cola\" }\n").unwrap();
+        assert_eq!(
+            map.laser,
+            LaserSource::Cola {
+                listen: "127.0.0.1:2111".parse().unwrap(),
+                driver: true
+            }
+        );
     }
 
     #[test]
