@@ -507,12 +507,18 @@ impl Scenario {
             ));
         }
 
+        // A section's fields may be nested (`rtk.hdop`): each part is a key.
+        let section = |name: &'static str, field: &'static str| {
+            field
+                .split('.')
+                .fold(at(&[name]), |path, key| path.key(key))
+        };
         self.gps
             .validate()
-            .map_err(|e| FieldError::new(at(&["gps", e.field]), e.message))?;
+            .map_err(|e| FieldError::new(section("gps", e.field), e.message))?;
         self.laser
             .validate()
-            .map_err(|e| FieldError::new(at(&["laser", e.field]), e.message))?;
+            .map_err(|e| FieldError::new(section("laser", e.field), e.message))?;
         self.devices
             .validate(&self.can.interface)
             .map_err(|e| device_field(&e))?;

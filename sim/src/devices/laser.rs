@@ -208,6 +208,19 @@ impl LaserConfig {
         ] {
             finite(field, v)?;
         }
+        // The scanner sits on the car; a yaw is at most a turn either way.
+        for (field, v, limit, unit) in [
+            ("mount_x", self.mount_x, 20.0, "m of the rear axle"),
+            ("mount_y", self.mount_y, 20.0, "m of the rear axle"),
+            ("mount_yaw_deg", self.mount_yaw_deg, 360.0, "degrees"),
+        ] {
+            if v.abs() > limit {
+                return Err(FieldError::new(
+                    field,
+                    format!("must be within [-{limit}, {limit}] {unit}, is {v}"),
+                ));
+            }
+        }
         let s = self.spec();
         let profile = format!("{:?}", self.profile).to_lowercase();
         let from = |field: &'static str, set: bool| {

@@ -192,10 +192,19 @@ macro_rules! fix_model_table {
                         return Err(FieldError::new(field, format!("{v} m exceeds 1000 m")));
                     }
                 }
-                if !(self.time_constant_s.is_finite() && self.time_constant_s > 0.0) {
+                if self.velocity_sigma_mps > 100.0 {
+                    return Err(FieldError::new(
+                        concat!($prefix, ".velocity_sigma_mps"),
+                        format!("{} m/s exceeds 100 m/s", self.velocity_sigma_mps),
+                    ));
+                }
+                if !(self.time_constant_s.is_finite()
+                    && self.time_constant_s > 0.0
+                    && self.time_constant_s <= 86_400.0)
+                {
                     return Err(FieldError::new(
                         concat!($prefix, ".time_constant_s"),
-                        format!("must be positive, is {}", self.time_constant_s),
+                        format!("must be within (0, 86400] s, is {}", self.time_constant_s),
                     ));
                 }
                 if !(0.0..=1.0).contains(&self.white_fraction) {
@@ -339,10 +348,11 @@ impl GpsConfig {
             ("antenna_y", self.antenna_y),
             ("antenna_z", self.antenna_z),
         ] {
-            if !v.is_finite() {
+            // The antenna sits on the car: within 20 m of its rear axle.
+            if !(v.is_finite() && v.abs() <= 20.0) {
                 return Err(FieldError::new(
                     field,
-                    format!("{v} is not a finite number"),
+                    format!("must be within [-20, 20] m of the rear axle, is {v}"),
                 ));
             }
         }

@@ -1,0 +1,141 @@
+//! Scenario files are range-checked at load, every field, with the file, line and
+//! field named (issue 11, findings 1 and 9): non-finite numbers, values beyond f32
+//! (which gave false collisions at t = 0), and what `run` refused while `check`
+//! accepted it.
+
+use ugv_sim::ScenarioError;
+use ugv_sim::scenario::Scenario;
+
+/// Every floating-point field of the default scenario written out, as a path of keys
+/// and array indices.
+fn float_fields(value: &toml::Value, path: &mut Vec<String>, out: &mut Vec<Vec<String>>) {
+    match value {
+        toml::Value::Float(_) => out.push(path.clone()),
+        toml::Value::Table(t) => {
+            for (k, v) in t {
+                path.push(k.clone());
+                float_fields(v, path, out);
+                path.pop();
+            }
+        }
+        toml::Value::Array(items) => {
+            for (i, v) in items.iter().enumerate() {
+                // Keys name tables; an element index attaches to its array.
+                let last = path.pop().unwrap_or_default();
+                path.push(format!("{last}[{i}]"));
+                float_fields(v, path, out);
+                path.pop();
+                path.push(last);
+            }
+        }
+        _ => {}
+    }
+}
+
+fn set(value: &mut toml::Value, path: &[String], to: f64) {
+    let Some((first, rest)) = path.split_first() else {
+        *value = toml::Value::Float(to);
+        return;
+    };
+    let (key, index) = match first.split_once('[') {
+        Some((k, i)) => (k, i.trim_end_matches(']').parse::<usize>().ok()),
+        None => (first.as_str(), None),
+    };
+    let mut next = &mut value[key];
+    if let Some(i) = index {
+        next = &mut next[i];
+    }
+    set(next, rest, to);
+}
+
+fn default_table() -> toml::Value {
+    let text = toml::to_string(&Scenario::default()).expect("the default encodes");
+    toml::from_str(&text).expect("the default decodes")
+}
+
+#[test]
+fn every_float_field_refuses_nan_infinities_and_values_beyond_f32() {
+    let base = default_table();
+    let mut fields = Vec::new();
+    float_fields(&base, &mut Vec::new(), &mut fields);
+    assert!(fields.len() > 60, "found only {} fields", fields.len());
+    let mut wrong = Vec::new();
+    for path in &fields {
+        let name = path.join(".");
+        // Fields that are points of a polyline: each coordinate, element by element.
+        for to in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e39, -1e39] {
+            let mut v = base.clone();
+            set(&mut v, path, to);
+            let text = toml::to_string(&v).expect("encodes");
+            match Scenario::from_toml(&text, "s.toml") {
+                Err(ScenarioError::Invalid(e)) => {
+                    let line = text.lines().nth(e.line - 1).unwrap_or_default();
+                    let key = path.last().map(|k| k.split('[').next().unwrap_or(k));
+                    let key = key.unwrap_or_default();
+                    if e.file != "s.toml" || e.field != name || !line.contains(key) {
+                        wrong.push(format!("{name} = {to}: {e} (line: {line:?})"));
+                    }
+                }
+                // A parse error names its line itself (an integer field given a float).
+                Err(ScenarioError::Parse { .. }) => {}
+                other => wrong.push(format!("{name} = {to}: accepted ({})", other.is_ok())),
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{} wrong:\n{}", wrong.len(), wrong.join("\n"));
+}
+
+fn invalid(text: &str) -> ugv_fields::LocatedError {
+    match Scenario::from_toml(text, "bad.toml") {
+        Err(ScenarioError::Invalid(e)) => e,
+        other => panic!("expected a refusal of\n{text}\ngot {other:?}"),
+    }
+}
+
+#[test]
+fn a_goal_a_step_from_the_start_is_refused_by_the_scenario_itself() {
+    // `ugv-sim check` accepted it and `run` refused it (the controller's rule).
+    let e = invalid("[start]\nx = 0\ny = 0\nheading_deg = 0\n\n[goal]\nx = 0.3\ny = 0\n");
+    assert_eq!((e.field.as_str(), e.line), ("goal", 6), "{e}");
+    assert!(e.message.contains("at least 1 m"), "{e}");
+}
+
+#[test]
+fn an_obstacle_beyond_f32_is_refused_not_collided_with() {
+    let e = invalid("[[obstacles]]\nkind = \"circle\"\nx = 1e39\ny = 0\nradius = 1\n");
+    assert_eq!(e.to_string(), "bad.toml:3: obstacles[0].x: must be within [-100000, 100000] m from the origin, is 1000000000000000000000000000000000000000");
+    let e = invalid(
+        "[[obstacles]]\nkind = \"wall\"\npoints = [[0, 50], [10, 50], [20, 1e300]]\nthickness = 0.2\n",
+    );
+    assert_eq!((e.field.as_str(), e.line), ("obstacles[0].points[2]", 3), "{e}");
+}
+
+#[test]
+fn the_epoch_is_parsed_at_load_with_its_line() {
+    for epoch in ["99999999999-01-01T00:00:00Z", "2026-05-04T14:00:00+99999:00", "2026-13-01T00:00:00Z"] {
+        let text = format!("name = \"e\"\n\n[sim]\nepoch = \"{epoch}\"\n");
+        match Scenario::from_toml(&text, "e.toml") {
+            Err(ScenarioError::Parse { message, .. }) => {
+                assert!(message.contains("line 4"), "{message}");
+                assert!(message.contains("RFC 3339") || message.contains("outside"), "{message}");
+            }
+            other => panic!("{epoch}: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn the_shipped_scenarios_still_load() {
+    for dir in ["scenarios", "scenarios/suite"] {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
+        let mut n = 0;
+        for f in std::fs::read_dir(&dir).expect("scenario folder") {
+            let p = f.expect("entry").path();
+            if p.extension().is_some_and(|e| e == "toml") {
+                Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                n += 1;
+            }
+        }
+        assert!(n > 0, "no scenarios in {}", dir.display());
+    }
+}
