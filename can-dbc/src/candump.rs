@@ -4,6 +4,26 @@
 
 use std::fmt;
 
+/// How much of a token an error message shows ([`excerpt`]).
+pub const TOKEN_EXCERPT_CHARS: usize = 40;
+
+/// `text` for a message: whole when it has at most `max_chars` characters, else its
+/// first `max_chars` and a marker of how much was cut (`... (1234 more characters)`),
+/// so an error never echoes a line or token of unbounded length.
+pub fn excerpt(text: &str, max_chars: usize) -> String {
+    match text.char_indices().nth(max_chars) {
+        None => text.to_owned(),
+        Some((cut, _)) => {
+            let more = text[cut..].chars().count();
+            format!("{}... ({more} more characters)", &text[..cut])
+        }
+    }
+}
+
+fn token(text: &str) -> String {
+    excerpt(text, TOKEN_EXCERPT_CHARS)
+}
+
 /// One frame read from a text line.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TextFrame {
@@ -43,21 +63,21 @@ pub enum CandumpError {
 
 fn parse_id(text: &str) -> Result<(u32, bool), CandumpError> {
     if text.is_empty() || !text.chars().all(|c| c.is_ascii_hexdigit()) {
-        return Err(CandumpError::BadId(text.to_owned()));
+        return Err(CandumpError::BadId(token(text)));
     }
-    let id = u32::from_str_radix(text, 16).map_err(|_| CandumpError::IdRange(text.to_owned()))?;
+    let id = u32::from_str_radix(text, 16).map_err(|_| CandumpError::IdRange(token(text)))?;
     // can-utils writes 11-bit IDs with 3 digits and 29-bit IDs with 8.
     let extended = text.len() > 3;
     if (extended && id > 0x1FFF_FFFF) || (!extended && id > 0x7FF) {
-        return Err(CandumpError::IdRange(text.to_owned()));
+        return Err(CandumpError::IdRange(token(text)));
     }
     Ok((id, extended))
 }
 
 fn parse_hex_bytes(text: &str) -> Result<Vec<u8>, CandumpError> {
     let clean: String = text.chars().filter(|c| *c != '.').collect();
-    if clean.len() % 2 != 0 || !clean.chars().all(|c| c.is_ascii_hexdigit()) {
-        return Err(CandumpError::BadData(text.to_owned()));
+    if !clean.len().is_multiple_of(2) || !clean.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(CandumpError::BadData(token(text)));
     }
     let bytes: Vec<u8> = (0..clean.len())
         .step_by(2)
@@ -75,7 +95,7 @@ pub fn parse_compact(frame: &str) -> Result<(u32, bool, bool, Vec<u8>), CandumpE
         return Err(CandumpError::MissingFrame);
     };
     if data.starts_with('#') {
-        return Err(CandumpError::CanFd(frame.to_owned()));
+        return Err(CandumpError::CanFd(token(frame)));
     }
     let (id, extended) = parse_id(id)?;
     if data.starts_with(['R', 'r']) {
@@ -132,7 +152,7 @@ pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
                 .and_then(|l| l.strip_suffix(']'))
                 .and_then(|l| l.parse::<usize>().ok())
                 .filter(|l| *l <= 8)
-                .ok_or_else(|| CandumpError::BadLength((*len).to_owned()))?;
+                .ok_or_else(|| CandumpError::BadLength(token(len)))?;
             let remote = bytes.first().is_some_and(|b| *b == "remote");
             let data = if remote {
                 Vec::new()
@@ -183,6 +203,19 @@ impl fmt::Display for Compact<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn errors_cut_long_tokens_with_a_marker() {
+        assert_eq!(excerpt("short", 40), "short");
+        assert_eq!(excerpt("abcdef", 3), "abc... (3 more characters)");
+        assert_eq!(excerpt("é€日本", 2), "é€... (2 more characters)");
+        let huge = "Z".repeat(1 << 20);
+        let e = parse_line(&format!("vcan0 {huge}#00"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 200, "{e}");
+        assert!(e.contains("1048536 more characters"), "{e}");
+    }
 
     #[test]
     fn log_form() {

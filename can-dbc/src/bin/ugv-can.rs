@@ -114,6 +114,71 @@ fn decimals(s: &SignalSpec) -> usize {
     }
 }
 
+/// The longest line `decode` reads whole, bytes: far beyond any candump line (a
+/// classic frame's log line is under 60); the head of a longer one is kept for the
+/// error, the rest skipped, so memory stays bounded whatever the input.
+const MAX_LINE: usize = 4096;
+
+/// How much of a line an error message shows.
+const LINE_EXCERPT_CHARS: usize = 120;
+
+/// A line for an error message: quoted, cut at [`LINE_EXCERPT_CHARS`] characters with
+/// a marker of how much was cut.
+fn quoted(line: &str) -> String {
+    let line = line.trim_end_matches(['\r', '\n']);
+    match line.char_indices().nth(LINE_EXCERPT_CHARS) {
+        None => format!("{line:?}"),
+        Some((cut, _)) => format!(
+            "{:?}... ({} more characters)",
+            &line[..cut],
+            line[cut..].chars().count()
+        ),
+    }
+}
+
+/// Read the next line (up to `\n`, which is dropped with a `\r` before it) into
+/// `line`, keeping at most `max` bytes of it. Returns the line's whole length in bytes
+/// (more than `max` when it was cut), or `None` at the end of the input.
+fn read_line(
+    reader: &mut impl BufRead,
+    max: usize,
+    line: &mut Vec<u8>,
+) -> std::io::Result<Option<u64>> {
+    line.clear();
+    let mut length = 0u64;
+    let mut any = false;
+    loop {
+        let chunk = match reader.fill_buf() {
+            Ok(c) => c,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if chunk.is_empty() {
+            break;
+        }
+        any = true;
+        let (part, used, done) = match chunk.iter().position(|&b| b == b'\n') {
+            Some(i) => (&chunk[..i], i + 1, true),
+            None => (chunk, chunk.len(), false),
+        };
+        let room = max.saturating_sub(line.len()).min(part.len());
+        line.extend_from_slice(&part[..room]);
+        length += part.len() as u64;
+        reader.consume(used);
+        if done {
+            break;
+        }
+    }
+    if !any {
+        return Ok(None);
+    }
+    if line.last() == Some(&b'\r') && length <= max as u64 {
+        line.pop();
+        length -= 1;
+    }
+    Ok(Some(length))
+}
+
 fn decode(
     network: &NetworkSpec,
     input: Option<PathBuf>,
@@ -127,19 +192,49 @@ fn decode(
             std::fs::File::open(p).with_context(|| format!("opening {}", p.display()))?,
         )),
     };
+    let mut reader = reader;
     let mut out = std::io::stdout().lock();
     let mut receivers: BTreeMap<String, E2eRx<'_>> = BTreeMap::new();
     let (mut frames, mut malformed) = (0u64, 0u64);
-    for (n, line) in reader.lines().enumerate() {
-        let line = line.with_context(|| format!("reading line {}", n + 1))?;
+    let mut bytes = Vec::new();
+    let mut n = 0u64;
+    loop {
+        n += 1;
+        let length = match read_line(&mut reader, MAX_LINE, &mut bytes)
+            .with_context(|| format!("reading line {n}"))?
+        {
+            None => break,
+            Some(length) => length,
+        };
+        if length > MAX_LINE as u64 {
+            malformed += 1;
+            eprintln!(
+                "ugv-can: line {n}: {length} bytes, longer than a candump line can be ({MAX_LINE}), skipped: {}",
+                quoted(&String::from_utf8_lossy(&bytes))
+            );
+            continue;
+        }
+        let line = match std::str::from_utf8(&bytes) {
+            Ok(line) => line,
+            Err(e) => {
+                malformed += 1;
+                eprintln!(
+                    "ugv-can: line {n}: not UTF-8 text (byte {:#04x} at offset {}), skipped: {}",
+                    bytes.get(e.valid_up_to()).copied().unwrap_or_default(),
+                    e.valid_up_to(),
+                    quoted(&String::from_utf8_lossy(&bytes))
+                );
+                continue;
+            }
+        };
         if line.trim().is_empty() {
             continue;
         }
-        let frame = match parse_line(&line) {
+        let frame = match parse_line(line) {
             Ok(f) => f,
             Err(e) => {
                 malformed += 1;
-                eprintln!("ugv-can: line {}: {e}: {line:?}", n + 1);
+                eprintln!("ugv-can: line {n}: {e}: {}", quoted(line));
                 continue;
             }
         };
