@@ -5,9 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{
-    FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, within,
-};
+use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, within};
 
 /// Why a configuration was refused.
 #[derive(Debug, thiserror::Error)]
@@ -258,9 +256,27 @@ impl ControllerConfig {
         let m = &self.mission;
         let at = |k: &'static str| FieldPath::of(&["mission", k]);
         let d = &m.datum;
-        within(&at("datum").key("latitude"), d.latitude, -89.0, 89.0, "degrees")?;
-        within(&at("datum").key("longitude"), d.longitude, -180.0, 180.0, "degrees")?;
-        within(&at("datum").key("altitude"), d.altitude, -1_000.0, 10_000.0, "m")?;
+        within(
+            &at("datum").key("latitude"),
+            d.latitude,
+            -89.0,
+            89.0,
+            "degrees",
+        )?;
+        within(
+            &at("datum").key("longitude"),
+            d.longitude,
+            -180.0,
+            180.0,
+            "degrees",
+        )?;
+        within(
+            &at("datum").key("altitude"),
+            d.altitude,
+            -1_000.0,
+            10_000.0,
+            "m",
+        )?;
         coordinate(&at("start_x"), m.start_x)?;
         coordinate(&at("start_y"), m.start_y)?;
         coordinate(&at("goal_x"), m.goal_x)?;
@@ -287,7 +303,13 @@ impl ControllerConfig {
             ));
         }
         // The DBC's MaxRate and TargetSpeed ranges.
-        within(&at("steer_rate_deg_s"), v.steer_rate_deg_s, 0.0, 500.0, "deg/s")?;
+        within(
+            &at("steer_rate_deg_s"),
+            v.steer_rate_deg_s,
+            0.0,
+            500.0,
+            "deg/s",
+        )?;
         positive_up_to(&at("max_speed"), v.max_speed, 10.0, "m/s")?;
         positive_up_to(&at("radius"), v.radius, 20.0, "m")?;
         for (k, x) in [
@@ -308,7 +330,10 @@ impl ControllerConfig {
         if pc.cruise_speed > v.max_speed {
             return Err(FieldError::new(
                 at("cruise_speed"),
-                format!("{} exceeds vehicle.max_speed {}", pc.cruise_speed, v.max_speed),
+                format!(
+                    "{} exceeds vehicle.max_speed {}",
+                    pc.cruise_speed, v.max_speed
+                ),
             ));
         }
         positive_up_to(&at("steer_usage"), pc.steer_usage, 1.0, "")?;
@@ -322,9 +347,21 @@ impl ControllerConfig {
         for (i, f) in pc.pace_fractions.iter().enumerate() {
             positive_up_to(&at("pace_fractions").index(i), *f, 1.0, "")?;
         }
-        within(&at("moving_time_margin_s"), pc.moving_time_margin_s, 0.0, 10.0, "s")?;
+        within(
+            &at("moving_time_margin_s"),
+            pc.moving_time_margin_s,
+            0.0,
+            10.0,
+            "s",
+        )?;
         within(&at("moving_margin"), pc.moving_margin, 0.0, 5.0, "m")?;
-        within(&at("pace_time_weight"), pc.pace_time_weight, 0.0, 1e6, "m^3/s")?;
+        within(
+            &at("pace_time_weight"),
+            pc.pace_time_weight,
+            0.0,
+            1e6,
+            "m^3/s",
+        )?;
         positive_up_to(&at("align_enter_deg"), pc.align_enter_deg, 90.0, "degrees")?;
         positive_up_to(&at("align_exit_deg"), pc.align_exit_deg, 90.0, "degrees")?;
         if !(pc.align_exit_deg > 0.0
@@ -343,7 +380,10 @@ impl ControllerConfig {
         if pc.align_speed > v.max_speed {
             return Err(FieldError::new(
                 at("align_speed"),
-                format!("{} exceeds vehicle.max_speed {}", pc.align_speed, v.max_speed),
+                format!(
+                    "{} exceeds vehicle.max_speed {}",
+                    pc.align_speed, v.max_speed
+                ),
             ));
         }
 

@@ -351,7 +351,11 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                 }
                 Err(InputError::Lost(why)) => {
                     self.gps_lost = true;
-                    self.lost(now, FaultReportCode::GpsLost, format!("GPS port lost: {why}"));
+                    self.lost(
+                        now,
+                        FaultReportCode::GpsLost,
+                        format!("GPS port lost: {why}"),
+                    );
                 }
             }
         }

@@ -121,7 +121,12 @@ impl Trace {
             let record = match serde_json::from_str::<TraceRecord>(line) {
                 Ok(r) => r,
                 Err(_) if i + 1 == lines.len() && !complete => break,
-                Err(source) => return Err(TraceReadError::Line { line: i + 1, source }),
+                Err(source) => {
+                    return Err(TraceReadError::Line {
+                        line: i + 1,
+                        source,
+                    });
+                }
             };
             match record {
                 TraceRecord::Sample(s) => samples.push(s),
@@ -200,7 +205,12 @@ impl<W: Write> TraceWriter<W> {
     }
 
     /// Write what is new in `ctl` (and `fixes`, the fix timings so far) at `now`.
-    pub fn update(&mut self, now: f64, ctl: &Controller, fixes: &[FixTiming]) -> std::io::Result<()> {
+    pub fn update(
+        &mut self,
+        now: f64,
+        ctl: &Controller,
+        fixes: &[FixTiming],
+    ) -> std::io::Result<()> {
         for s in ctl.samples.get(self.samples..).unwrap_or(&[]) {
             self.record(&TraceRecord::Sample(*s))?;
             if let Some(c) = &mut self.csv {
@@ -242,7 +252,12 @@ impl<W: Write> TraceWriter<W> {
     }
 
     /// The last records (the final state at `now`), flushed.
-    pub fn finish(&mut self, now: f64, ctl: &Controller, fixes: &[FixTiming]) -> std::io::Result<()> {
+    pub fn finish(
+        &mut self,
+        now: f64,
+        ctl: &Controller,
+        fixes: &[FixTiming],
+    ) -> std::io::Result<()> {
         self.last_flush = f64::NEG_INFINITY;
         self.update(now, ctl, fixes)
     }

@@ -86,7 +86,11 @@ fn the_fields_named_in_the_issue_are_refused() {
         let e = refused(&text);
         assert_eq!(e.field, format!("{section}.{key}"));
         assert_eq!(e.line, 2);
-        assert!(e.to_string().starts_with(&format!("c.toml:2: {section}.{key}: ")), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with(&format!("c.toml:2: {section}.{key}: ")),
+            "{e}"
+        );
     }
 }
 
@@ -120,7 +124,9 @@ fn the_controller_refuses_a_configuration_that_bypassed_the_loader() {
 
 #[test]
 fn the_default_configuration_and_a_full_file_pass() {
-    ControllerConfig::default().validate().expect("the default is valid");
+    ControllerConfig::default()
+        .validate()
+        .expect("the default is valid");
     let text = toml::to_string(&ControllerConfig::default()).expect("encodes");
     ControllerConfig::from_toml(&text, "full.toml").expect("the default written out is valid");
 }

@@ -57,7 +57,10 @@ fn a_killed_controller_leaves_its_trace_up_to_its_last_second() {
     let text = std::fs::read_to_string(&path).expect("read");
     let trace = Trace::from_jsonl(&text).expect("a readable trace");
     let last = trace.samples.last().map(|s| s.t).expect("samples");
-    assert!(last >= 5.49 - TRACE_FLUSH_PERIOD, "the last second at most is lost: {last}");
+    assert!(
+        last >= 5.49 - TRACE_FLUSH_PERIOD,
+        "the last second at most is lost: {last}"
+    );
     assert!(trace.duration >= 4.5, "{}", trace.duration);
     let rows = std::fs::read_to_string(&csv).expect("csv").lines().count();
     assert!(rows > 400, "training rows on disk: {rows}");
@@ -85,7 +88,10 @@ fn a_trace_cut_mid_line_reads_up_to_the_cut() {
     assert!(partial.samples.len() >= 199, "{}", partial.samples.len());
     // A bad line elsewhere is an error that names it.
     let broken = text.replacen("{\"sample\"", "{\"sampel\"", 1);
-    let e = Trace::from_jsonl(&broken).err().map(|e| e.to_string()).unwrap_or_default();
+    let e = Trace::from_jsonl(&broken)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
     assert!(e.starts_with("trace line 1:"), "{e}");
 }
 

@@ -261,7 +261,10 @@ mod tests {
 
     #[test]
     fn paths_print_keys_and_indices() {
-        let p = FieldPath::of(&["obstacles"]).index(1).key("motion").key("speed");
+        let p = FieldPath::of(&["obstacles"])
+            .index(1)
+            .key("motion")
+            .key("speed");
         assert_eq!(p.to_string(), "obstacles[1].motion.speed");
         assert_eq!(FieldPath::root().to_string(), "(the file)");
         assert_eq!(
@@ -287,8 +290,11 @@ mod tests {
 
     #[test]
     fn located_errors_name_file_line_and_field() {
-        let e = FieldError::new(FieldPath::of(&["gps", "rtk", "horizontal_sigma_m"]), "must be positive")
-            .located(TEXT, "s.toml");
+        let e = FieldError::new(
+            FieldPath::of(&["gps", "rtk", "horizontal_sigma_m"]),
+            "must be positive",
+        )
+        .located(TEXT, "s.toml");
         assert_eq!(
             e.to_string(),
             "s.toml:7: gps.rtk.horizontal_sigma_m: must be positive"

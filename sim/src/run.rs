@@ -4,7 +4,7 @@
 
 use embedded_can::nb::Can;
 use firmware_bridge::{BridgeError, CanPort};
-use golf_car_can::E2eStats;
+use golf_car_can::{CanMessage, E2eStats};
 use serde::Serialize;
 
 use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
@@ -135,7 +135,59 @@ pub struct Sim<B> {
     outputs: SensorOutput,
     /// The driven path, sampled every 50 ms.
     pub trajectory: Vec<(f64, VehicleState)>,
+    /// Since the controller went away: the run goes on until the car is safe.
+    wind_down: Option<WindDown>,
 }
+
+/// How long the run goes on after the controller went away, waiting for both ECUs'
+/// safe state and the car to stop, simulated seconds; past it the run ends anyway, as
+/// a failure.
+pub const WIND_DOWN_LIMIT: f64 = 10.0;
+
+/// One ECU's way to its safe state after the controller went away.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EcuSafeState {
+    /// The last command the ECU received, simulated seconds.
+    pub last_command_s: Option<f64>,
+    /// When its reports first said it was disabled, simulated seconds.
+    pub safe_report_s: Option<f64>,
+    /// From the last command to that report, ms: the watchdog's reaction when the
+    /// controller vanished; negative when the ECU was already safe before the
+    /// controller's last command (the controller estopped it, then kept commanding it
+    /// disabled for a while).
+    pub latency_ms: Option<f64>,
+    /// The ECU's command timeout plus one report period, ms: the contract.
+    pub bound_ms: f64,
+    pub within_bound: bool,
+    /// Whether the controller had ever enabled it (if not, it was safe all along).
+    pub was_enabled: bool,
+}
+
+/// What followed the controller going away (its process exited, or its loop ended).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SafeStateReport {
+    /// Why the controller went away.
+    pub reason: String,
+    /// When the simulator noticed, simulated seconds.
+    pub noticed_s: f64,
+    /// The car's speed then, m/s.
+    pub speed_then: f64,
+    pub steering: EcuSafeState,
+    pub throttle: EcuSafeState,
+    /// When the car came to a stop, simulated seconds.
+    pub stopped_s: Option<f64>,
+}
+
+#[derive(Clone, Debug)]
+struct WindDown {
+    reason: String,
+    since: f64,
+    speed_then: f64,
+    stopped: Option<f64>,
+}
+
+/// Below this speed the car counts as stopped, m/s.
+const STOPPED: f64 = 0.05;
 
 impl<B: Can> Sim<B> {
     /// A run of `scenario` with the steering and throttle ECUs on their own bus endpoints.
@@ -160,6 +212,7 @@ impl<B: Can> Sim<B> {
             next_scan: 0.0,
             outputs: SensorOutput::default(),
             trajectory: vec![(0.0, vehicle)],
+            wind_down: None,
             scenario,
         }
     }
@@ -246,7 +299,20 @@ impl<B: Can> Sim<B> {
                 obstacle: i,
             }));
         }
-        if self.scenario.success.reach_goal
+        if let Some(w) = &mut self.wind_down {
+            // The controller is gone: no goal counts any more; the run ends once the car
+            // is safe (both ECUs report their safe state and it has stopped).
+            if w.stopped.is_none() && self.vehicle.v.abs() < STOPPED {
+                w.stopped = Some(now);
+            }
+            let safe = self.steering.safe() && self.throttle.safe();
+            if (safe && w.stopped.is_some()) || now - w.since >= WIND_DOWN_LIMIT {
+                return Ok(Some(Outcome::Stopped {
+                    time: now,
+                    reason: w.reason.clone(),
+                }));
+            }
+        } else if self.scenario.success.reach_goal
             && self.distance_to_goal() <= self.scenario.goal.tolerance
         {
             return Ok(Some(Outcome::GoalReached { time: now }));
@@ -255,6 +321,52 @@ impl<B: Can> Sim<B> {
             return Ok(Some(Outcome::TimeLimit { time: now }));
         }
         Ok(None)
+    }
+
+    /// The controller went away (`reason`): from now on the run waits for the car to
+    /// be safe, up to [`WIND_DOWN_LIMIT`], and reports how it got there.
+    pub fn controller_gone(&mut self, reason: String) {
+        if self.wind_down.is_none() {
+            self.wind_down = Some(WindDown {
+                reason,
+                since: self.time(),
+                speed_then: self.vehicle.v,
+                stopped: None,
+            });
+        }
+    }
+
+    /// The way to the safe state after the controller went away, if it did.
+    pub fn safe_state(&self) -> Option<SafeStateReport> {
+        let w = self.wind_down.as_ref()?;
+        let ecu = |st: &Station<B>, command: u16| {
+            let t = crate::ecu::safety_timing(&self.scenario, command);
+            let period = crate::ecu::period_of::<golf_car_can::SteeringReport>();
+            let bound_ms = (t.command_timeout + period) * 1e3;
+            let last = st.last_command();
+            let safe = st.safe_since();
+            let latency_ms = match (last, safe) {
+                (Some(c), Some(s)) => Some((s - c) * 1e3),
+                _ => None,
+            };
+            EcuSafeState {
+                last_command_s: last,
+                safe_report_s: safe,
+                latency_ms,
+                bound_ms,
+                // Never enabled: it was safe all along.
+                within_bound: !st.was_enabled() || latency_ms.is_some_and(|l| l <= bound_ms + 1e-6),
+                was_enabled: st.was_enabled(),
+            }
+        };
+        Some(SafeStateReport {
+            reason: w.reason.clone(),
+            noticed_s: w.since,
+            speed_then: w.speed_then,
+            steering: ecu(&self.steering, golf_car_can::SteeringCmd::ID),
+            throttle: ecu(&self.throttle, golf_car_can::ThrottleCmd::ID),
+            stopped_s: w.stopped,
+        })
     }
 
     pub fn distance_to_goal(&self) -> f64 {
@@ -313,6 +425,9 @@ pub struct RunReport {
     pub report_jitter: Jitter,
     /// How late the physics ticks came (wall clock; zero in lockstep).
     pub tick_lateness: Jitter,
+    /// After the controller went away: each ECU's time to its safe state.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safe_state: Option<SafeStateReport>,
 }
 
 impl<B: Can> Sim<B> {
@@ -332,6 +447,7 @@ impl<B: Can> Sim<B> {
             throttle_can,
             report_jitter: self.report_jitter(),
             tick_lateness: self.tick_lateness(),
+            safe_state: self.safe_state(),
         }
     }
 }

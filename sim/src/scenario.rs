@@ -341,7 +341,10 @@ fn check_points(path: &FieldPath, points: &[[f64; 2]], min: usize) -> Result<(),
     if points.len() > MAX_POINTS {
         return Err(FieldError::new(
             path.clone(),
-            format!("has {} points, at most {MAX_POINTS} are allowed", points.len()),
+            format!(
+                "has {} points, at most {MAX_POINTS} are allowed",
+                points.len()
+            ),
         ));
     }
     for (i, p) in points.iter().enumerate() {
@@ -364,8 +367,20 @@ fn check_motion(path: &FieldPath, motion: &Option<Motion>) -> Result<(), FieldEr
     match motion {
         None => Ok(()),
         Some(Motion::Velocity { vx, vy }) => {
-            within(&path.key("vx"), *vx, -MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED, "m/s")?;
-            within(&path.key("vy"), *vy, -MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED, "m/s")
+            within(
+                &path.key("vx"),
+                *vx,
+                -MAX_OBSTACLE_SPEED,
+                MAX_OBSTACLE_SPEED,
+                "m/s",
+            )?;
+            within(
+                &path.key("vy"),
+                *vy,
+                -MAX_OBSTACLE_SPEED,
+                MAX_OBSTACLE_SPEED,
+                "m/s",
+            )
         }
         Some(Motion::Waypoints { points, speed, .. }) => {
             check_points(&path.key("points"), points, 2)?;
@@ -415,9 +430,27 @@ impl Scenario {
     fn validate(&self) -> Result<(), FieldError> {
         let at = |keys: &[&'static str]| FieldPath::of(keys);
         let d = &self.datum;
-        within(&at(&["datum", "latitude"]), d.latitude, -89.0, 89.0, "degrees")?;
-        within(&at(&["datum", "longitude"]), d.longitude, -180.0, 180.0, "degrees")?;
-        within(&at(&["datum", "altitude"]), d.altitude, -1_000.0, 10_000.0, "m")?;
+        within(
+            &at(&["datum", "latitude"]),
+            d.latitude,
+            -89.0,
+            89.0,
+            "degrees",
+        )?;
+        within(
+            &at(&["datum", "longitude"]),
+            d.longitude,
+            -180.0,
+            180.0,
+            "degrees",
+        )?;
+        within(
+            &at(&["datum", "altitude"]),
+            d.altitude,
+            -1_000.0,
+            10_000.0,
+            "m",
+        )?;
         coordinate(&at(&["start", "x"]), self.start.x)?;
         coordinate(&at(&["start", "y"]), self.start.y)?;
         angle_deg(&at(&["start", "heading_deg"]), self.start.heading_deg)?;
@@ -484,7 +517,13 @@ impl Scenario {
         positive_up_to(&sp("max_rate_deg_s"), s.max_rate_deg_s, 1_000.0, "deg/s")?;
         // The DBC's MotorCurrent range.
         within(&sp("idle_current_a"), s.idle_current_a, 0.0, 25.5, "A")?;
-        within(&sp("current_per_rate_a"), s.current_per_rate_a, 0.0, 10.0, "A per deg/s")?;
+        within(
+            &sp("current_per_rate_a"),
+            s.current_per_rate_a,
+            0.0,
+            10.0,
+            "A per deg/s",
+        )?;
         within(&sp("bias_deg"), s.bias_deg, -10.0, 10.0, "degrees")?;
         let t = &self.throttle;
         let tp = |k: &'static str| at(&["throttle", k]);
@@ -493,7 +532,13 @@ impl Scenario {
         positive_up_to(&tp("max_accel"), t.max_accel, 20.0, "m/s^2")?;
         positive_up_to(&tp("max_decel"), t.max_decel, 20.0, "m/s^2")?;
         positive_up_to(&tp("brake_decel"), t.brake_decel, 20.0, "m/s^2")?;
-        within(&tp("throttle_per_speed"), t.throttle_per_speed, 0.0, 100.0, "% per m/s")?;
+        within(
+            &tp("throttle_per_speed"),
+            t.throttle_per_speed,
+            0.0,
+            100.0,
+            "% per m/s",
+        )?;
         if self.can.interface.is_empty() || self.can.interface.len() > 15 {
             return Err(FieldError::new(
                 at(&["can", "interface"]),
@@ -523,8 +568,19 @@ impl Scenario {
             .validate(&self.can.interface)
             .map_err(|e| device_field(&e))?;
         let sim = &self.sim;
-        within(&at(&["sim", "physics_hz"]), sim.physics_hz, 10.0, 2000.0, "Hz")?;
-        positive_up_to(&at(&["sim", "time_limit_s"]), sim.time_limit_s, 86_400.0, "s")?;
+        within(
+            &at(&["sim", "physics_hz"]),
+            sim.physics_hz,
+            10.0,
+            2000.0,
+            "Hz",
+        )?;
+        positive_up_to(
+            &at(&["sim", "time_limit_s"]),
+            sim.time_limit_s,
+            86_400.0,
+            "s",
+        )?;
         within(
             &at(&["success", "min_clearance"]),
             self.success.min_clearance,
@@ -622,5 +678,8 @@ pub(crate) fn invalid_device(
 
 /// A device map error as a field error of the whole file.
 fn device_field(e: &crate::devices::map::DeviceError) -> FieldError {
-    FieldError::new(FieldPath::of(&["devices", e.path[0], e.path[1]]), e.message.clone())
+    FieldError::new(
+        FieldPath::of(&["devices", e.path[0], e.path[1]]),
+        e.message.clone(),
+    )
 }

@@ -82,7 +82,12 @@ fn every_float_field_refuses_nan_infinities_and_values_beyond_f32() {
             }
         }
     }
-    assert!(wrong.is_empty(), "{} wrong:\n{}", wrong.len(), wrong.join("\n"));
+    assert!(
+        wrong.is_empty(),
+        "{} wrong:\n{}",
+        wrong.len(),
+        wrong.join("\n")
+    );
 }
 
 fn invalid(text: &str) -> ugv_fields::LocatedError {
@@ -103,21 +108,35 @@ fn a_goal_a_step_from_the_start_is_refused_by_the_scenario_itself() {
 #[test]
 fn an_obstacle_beyond_f32_is_refused_not_collided_with() {
     let e = invalid("[[obstacles]]\nkind = \"circle\"\nx = 1e39\ny = 0\nradius = 1\n");
-    assert_eq!(e.to_string(), "bad.toml:3: obstacles[0].x: must be within [-100000, 100000] m from the origin, is 1000000000000000000000000000000000000000");
+    assert_eq!(
+        e.to_string(),
+        "bad.toml:3: obstacles[0].x: must be within [-100000, 100000] m from the origin, is 1000000000000000000000000000000000000000"
+    );
     let e = invalid(
         "[[obstacles]]\nkind = \"wall\"\npoints = [[0, 50], [10, 50], [20, 1e300]]\nthickness = 0.2\n",
     );
-    assert_eq!((e.field.as_str(), e.line), ("obstacles[0].points[2]", 3), "{e}");
+    assert_eq!(
+        (e.field.as_str(), e.line),
+        ("obstacles[0].points[2]", 3),
+        "{e}"
+    );
 }
 
 #[test]
 fn the_epoch_is_parsed_at_load_with_its_line() {
-    for epoch in ["99999999999-01-01T00:00:00Z", "2026-05-04T14:00:00+99999:00", "2026-13-01T00:00:00Z"] {
+    for epoch in [
+        "99999999999-01-01T00:00:00Z",
+        "2026-05-04T14:00:00+99999:00",
+        "2026-13-01T00:00:00Z",
+    ] {
         let text = format!("name = \"e\"\n\n[sim]\nepoch = \"{epoch}\"\n");
         match Scenario::from_toml(&text, "e.toml") {
             Err(ScenarioError::Parse { message, .. }) => {
                 assert!(message.contains("line 4"), "{message}");
-                assert!(message.contains("RFC 3339") || message.contains("outside"), "{message}");
+                assert!(
+                    message.contains("RFC 3339") || message.contains("outside"),
+                    "{message}"
+                );
             }
             other => panic!("{epoch}: {other:?}"),
         }

@@ -62,7 +62,10 @@ fn a_lost_gps_port_estops_the_car_before_the_controller_exits() {
     // state before its last (disabled) command, so the latency is negative.
     for e in [&s.steering, &s.throttle] {
         assert!(e.within_bound, "{s:#?}");
-        let (safe, last) = (e.safe_report_s.expect("safe"), e.last_command_s.expect("cmd"));
+        let (safe, last) = (
+            e.safe_report_s.expect("safe"),
+            e.last_command_s.expect("cmd"),
+        );
         assert!(safe < last && safe >= 5.0 && safe < 5.1, "{s:#?}");
     }
     // The estop (heartbeat estop, then FAULT_REPORT) put them there, not a timeout.
@@ -70,15 +73,29 @@ fn a_lost_gps_port_estops_the_car_before_the_controller_exits() {
     assert!(steering.safe_state_trips[2] >= 1, "{steering:?}");
     assert!(throttle.safe_state_trips[2] >= 1, "{throttle:?}");
     assert!(s.stopped_s.is_some(), "{s:#?}");
-    assert!(v.report.final_state.v.abs() < 0.05, "{:?}", v.report.final_state);
+    assert!(
+        v.report.final_state.v.abs() < 0.05,
+        "{:?}",
+        v.report.final_state
+    );
     assert!(matches!(v.report.outcome, Outcome::Stopped { .. }));
     assert!(!v.passed, "the mission was not completed");
-    assert!(v.failures.iter().all(|f| !f.contains("ECU")), "{:?}", v.failures);
+    assert!(
+        v.failures.iter().all(|f| !f.contains("ECU")),
+        "{:?}",
+        v.failures
+    );
 }
 
 #[test]
 fn a_killed_controller_leaves_both_ecus_safe_within_timeout_plus_one_period() {
-    let (run, v) = run(|now, _| if now >= 5.0 { Hook::Kill } else { Hook::Continue });
+    let (run, v) = run(|now, _| {
+        if now >= 5.0 {
+            Hook::Kill
+        } else {
+            Hook::Continue
+        }
+    });
     assert_eq!(run.controller_exit, None, "killed, not exited");
     let s = safe_state(&v);
     assert!(s.speed_then > 1.0, "the car was driving: {s:#?}");

@@ -204,7 +204,10 @@ impl PerceptionConfig {
             ("initial_velocity_sigma", self.initial_velocity_sigma),
             ("radius_process_sigma", self.radius_process_sigma),
             ("velocity_dead_band", self.velocity_dead_band),
-            ("velocity_significance_chi2", self.velocity_significance_chi2),
+            (
+                "velocity_significance_chi2",
+                self.velocity_significance_chi2,
+            ),
             ("moving_confirm_s", self.moving_confirm_s),
         ] {
             if v.abs() > PLAUSIBLE_LIMIT {

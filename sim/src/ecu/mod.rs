@@ -57,6 +57,8 @@ pub enum Ecu {
 pub struct EcuNode {
     pub ecu: Ecu,
     next_report: f64,
+    /// The enabled state the last report carried.
+    reported_enabled: Option<bool>,
     next_fault: f64,
     /// Frames the node ignored (not addressed to it: other reports, its own kind).
     pub ignored: u64,
@@ -81,6 +83,7 @@ impl EcuNode {
         EcuNode {
             ecu,
             next_report: 0.0,
+            reported_enabled: None,
             next_fault: 0.0,
             ignored: 0,
             second_sender: None,
@@ -141,7 +144,14 @@ impl EcuNode {
     /// while a fault the ECU detected itself lasts.
     pub fn due(&mut self, now: f64) -> Vec<GolfCarMessage> {
         let mut out = Vec::new();
-        if now + 1e-9 >= self.next_report {
+        // The report goes out on its period and, at once, when the ECU enters or
+        // leaves its enabled state (on change, as actuator ECUs do): the bus learns of
+        // a safe state within the physics step that caused it, not a period later.
+        let enabled = self.safety_ref().enabled();
+        let changed = self.reported_enabled != Some(enabled);
+        let periodic = now + 1e-9 >= self.next_report;
+        if periodic || changed {
+            self.reported_enabled = Some(enabled);
             let (msg, period) = match &self.ecu {
                 Ecu::Steering(e) => (
                     GolfCarMessage::SteeringReport(e.report()),
@@ -153,7 +163,9 @@ impl EcuNode {
                 ),
             };
             out.push(msg);
-            self.next_report = firmware_bridge::clock::next_slot(self.next_report, now, period);
+            if periodic {
+                self.next_report = firmware_bridge::clock::next_slot(self.next_report, now, period);
+            }
         }
         let own = self.safety_ref().fault().and_then(|c| c.own_fault_code());
         match own {

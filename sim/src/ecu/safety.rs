@@ -168,6 +168,11 @@ impl Safety {
         self.enabled
     }
 
+    /// When the last command arrived.
+    pub fn last_command(&self) -> Option<f64> {
+        self.last_command
+    }
+
     /// The fault being reported (latched until its condition clears).
     pub fn fault(&self) -> Option<Cause> {
         self.latched

@@ -63,6 +63,10 @@ pub struct Station<B> {
     sent: u64,
     /// Wall-clock times of the node's periodic reports (HIL jitter).
     report_times: Vec<f64>,
+    /// Since when (simulated time) the node's reports say it is disabled, after it
+    /// had been enabled: when the bus learnt of its safe state.
+    safe_since: Option<f64>,
+    was_enabled: bool,
 }
 
 impl<B: Can> Station<B> {
@@ -77,6 +81,8 @@ impl<B: Can> Station<B> {
             port,
             sent: 0,
             report_times: Vec::new(),
+            safe_since: None,
+            was_enabled: false,
         }
     }
 
@@ -109,13 +115,48 @@ impl<B: Can> Station<B> {
             return Ok(());
         };
         for m in node.due(now) {
-            if !matches!(m, GolfCarMessage::FaultReport(_)) {
+            let enabled = match &m {
+                GolfCarMessage::SteeringReport(r) => Some(r.enabled),
+                GolfCarMessage::ThrottleReport(r) => Some(r.enabled),
+                _ => None,
+            };
+            if let Some(enabled) = enabled {
                 self.report_times.push(wall);
+                if enabled {
+                    self.was_enabled = true;
+                    self.safe_since = None;
+                } else if self.was_enabled && self.safe_since.is_none() {
+                    self.safe_since = Some(now);
+                }
             }
             self.port.send_message(&m)?;
             self.sent += 1;
         }
         Ok(())
+    }
+
+    /// Since when the simulated ECU has reported its safe state (disabled after it had
+    /// been enabled), simulated seconds; `None` while enabled, or never driven.
+    pub fn safe_since(&self) -> Option<f64> {
+        self.safe_since
+    }
+
+    /// The ECU is in its safe state: its reports say so, or it was never enabled.
+    pub fn safe(&self) -> bool {
+        !self.was_enabled || self.safe_since.is_some()
+    }
+
+    /// Whether it was ever enabled.
+    pub fn was_enabled(&self) -> bool {
+        self.was_enabled
+    }
+
+    /// When the simulated ECU received its last command, simulated seconds.
+    pub fn last_command(&self) -> Option<f64> {
+        match &self.twin {
+            Twin::Simulated(node) => node.safety_ref().last_command(),
+            Twin::Physical(_) => None,
+        }
     }
 
     /// Wall-clock times of the periodic reports sent.
