@@ -1,0 +1,108 @@
+//! Replays every committed fuzz corpus (fuzz/corpus/<target>/) through the same
+//! function the fuzzer calls, on stable: the README's test command runs the campaigns'
+//! findings and coverage without nightly. A target without a corpus, or with an empty
+//! one, fails: a missing corpus must not pass as "nothing to replay".
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, ensure};
+
+fn fuzz_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz")
+}
+
+/// The files of a folder, sorted (inputs are files named by their hash).
+fn files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+        let path = entry?.path();
+        if path.is_file() {
+            out.push(path);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Runs `target` on every file, each under `catch_unwind`, and names every file that
+/// panicked.
+fn replay(name: &str, target: ugv_fuzz_targets::Target, inputs: &[PathBuf]) -> Result<()> {
+    let mut failed = Vec::new();
+    for path in inputs {
+        let data = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        if std::panic::catch_unwind(|| target(&data)).is_err() {
+            failed.push(path.display().to_string());
+        }
+    }
+    ensure!(
+        failed.is_empty(),
+        "{name}: {} of {} inputs panic:\n{}",
+        failed.len(),
+        inputs.len(),
+        failed.join("\n")
+    );
+    Ok(())
+}
+
+fn corpus(name: &str) -> Result<()> {
+    let target = ugv_fuzz_targets::TARGETS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, t)| *t)
+        .with_context(|| format!("no target {name}"))?;
+    let dir = fuzz_dir().join("corpus").join(name);
+    ensure!(dir.is_dir(), "the corpus {} is missing", dir.display());
+    let inputs = files(&dir)?;
+    ensure!(!inputs.is_empty(), "the corpus {} is empty", dir.display());
+    replay(name, target, &inputs)
+}
+
+macro_rules! corpus_tests {
+    ($($name:ident),* $(,)?) => {
+        $(
+            #[test]
+            fn $name() -> Result<()> {
+                corpus(stringify!($name))
+            }
+        )*
+
+        /// Every target has a replay test above, and every test a target.
+        #[test]
+        fn every_target_is_replayed() {
+            let tested = [$(stringify!($name)),*];
+            let targets: Vec<&str> = ugv_fuzz_targets::TARGETS.iter().map(|(n, _)| *n).collect();
+            assert_eq!(tested.to_vec(), targets);
+        }
+    };
+}
+
+corpus_tests!(
+    nmea_stream,
+    cola_telegrams,
+    cola_server,
+    candump_line,
+    dbc_spec,
+    scenario_toml,
+    controller_config,
+    plan_json,
+    anfis_model,
+    anfis_csv,
+    laser_frame,
+);
+
+/// Inputs kept from fuzz/artifacts/<target>/ (crashes fixed since): each must now
+/// run clean. They are also in the corpus; this keeps them even if a `cmin` drops one.
+#[test]
+fn regressions() -> Result<()> {
+    let root = fuzz_dir().join("regressions");
+    if !root.is_dir() {
+        return Ok(());
+    }
+    for (name, target) in ugv_fuzz_targets::TARGETS {
+        let dir = root.join(name);
+        if dir.is_dir() {
+            replay(name, *target, &files(&dir)?)?;
+        }
+    }
+    Ok(())
+}
