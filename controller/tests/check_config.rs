@@ -1,0 +1,74 @@
+//! `ugv-controller check-config` makes exactly the checks `run` makes before it opens a
+//! port (issue 11, finding 1: the perception checks ran only in `run`, so
+//! `check-config` passed files `run` refused, and a NaN laser yaw passed both).
+
+use std::process::Command;
+
+use anyhow::{Context, Result, ensure};
+
+/// `ugv-controller ARGS` on a configuration with `text`: exit code and stderr.
+fn controller(args: &[&str], text: &str) -> Result<(Option<i32>, String)> {
+    let dir = tempfile::tempdir()?;
+    let file = dir.path().join("mission.toml");
+    std::fs::write(&file, text)?;
+    let out = Command::new(env!("CARGO_BIN_EXE_ugv-controller"))
+        .args(args)
+        .arg(&file)
+        .output()
+        .context("running ugv-controller")?;
+    Ok((
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    ))
+}
+
+#[test]
+fn check_config_refuses_what_run_refuses_naming_file_line_and_field() -> Result<()> {
+    for (text, field) in [
+        (
+            "# the laser\n[vehicle]\nlaser_yaw_deg = nan\n",
+            "vehicle.laser_yaw_deg",
+        ),
+        (
+            "# perception\n[perception]\nmin_points = 0\n",
+            "perception.min_points",
+        ),
+        (
+            "# margin\n[planner]\nsafety_margin = -1\n",
+            "planner.safety_margin",
+        ),
+    ] {
+        let (code, stderr) = controller(&["check-config"], text)?;
+        ensure!(
+            code == Some(4),
+            "check-config exit {code:?} for\n{text}\n{stderr}"
+        );
+        ensure!(
+            stderr.contains(&format!("mission.toml:3: {field}: ")),
+            "{stderr}"
+        );
+        // `run` refuses it with the same words, before it opens anything (the ports
+        // named here do not exist).
+        let (code, run_err) = controller(
+            &[
+                "run",
+                "--gps",
+                "/nonexistent/gps",
+                "--laser",
+                "none",
+                "--can",
+                "none0",
+                "--config",
+            ],
+            text,
+        )?;
+        ensure!(code == Some(4), "run exit {code:?}\n{run_err}");
+        ensure!(
+            run_err.contains(&format!("mission.toml:3: {field}: ")),
+            "{run_err}"
+        );
+    }
+    let (code, stdout_err) = controller(&["check-config"], "[planner]\nsafety_margin = 0.5\n")?;
+    ensure!(code == Some(0), "a valid file passes: {stdout_err}");
+    Ok(())
+}
