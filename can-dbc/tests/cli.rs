@@ -86,3 +86,14 @@ fn decode_error_messages_cut_long_lines_with_a_marker() {
     assert!(second.contains("20971520 bytes"), "{second}");
     assert!(second.contains("more characters)"), "{second}");
 }
+
+#[test]
+fn encode_counter_out_of_range_is_refused_naming_the_argument() {
+    for counter in ["16", "255", "18446744073709551616", "-1"] {
+        let arg = format!("--counter={counter}");
+        let (code, _, stderr) = ugv_can(&["encode", "STEERING_CMD", "Enable=1", &arg], Vec::new());
+        assert_eq!(code, Some(2), "{counter}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{counter}: {stderr}");
+        assert!(stderr.contains("--counter"), "{counter}: {stderr}");
+    }
+}

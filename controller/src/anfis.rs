@@ -70,7 +70,10 @@ pub use bell::{BellGradient, BellMf};
 pub use command::{TrainArgs, train_command};
 pub use data::{DataFormat, Dataset};
 pub use model::{AnfisModel, InputSpec, MODEL_FORMAT, MODEL_VERSION, ModelSpec, RuleSpec};
-pub use train::{ModelSelection, TrainConfig, TrainReport, train, train_with_checking};
+pub use train::{
+    MAX_DESIGN_CELLS, MAX_EPOCHS, MAX_INITIAL_STEP, MAX_MFS_PER_INPUT, MAX_RULES, ModelSelection,
+    TrainConfig, TrainReport, train, train_with_checking,
+};
 
 /// Everything that can go wrong in the ANFIS module.
 #[derive(Debug, thiserror::Error)]

@@ -106,11 +106,14 @@ enum AnfisCommand {
         inputs: Vec<String>,
         #[arg(long, default_value = "steer_cmd")]
         target: String,
-        /// Membership functions per input.
+        /// Membership functions per input (one value for every input, or one per
+        /// input), each 1 to 32, at most 1024 rules (their product over the inputs).
         #[arg(long, value_delimiter = ',', default_value = "3")]
         mfs: Vec<usize>,
+        /// Epochs, 1 to 100000.
         #[arg(long, default_value_t = 100)]
         epochs: usize,
+        /// Jang's initial step size, normalised units, above 0 and at most 1.
         #[arg(long, default_value_t = 0.01)]
         step_size: f64,
         /// Checking data; the epoch with the lowest checking error is kept.
@@ -171,6 +174,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             args.epochs = epochs;
             args.step_size = step_size;
             args.checking = checking;
+            // The library's bounds, said in the command line's words.
+            args.validate().map_err(|e| match e {
+                ugv_controller::anfis::AnfisError::InvalidConfig { field, reason } => {
+                    anyhow::anyhow!("anfis train --{}: {reason}", field.replace('_', "-"))
+                }
+                other => other.into(),
+            })?;
             let report = ugv_controller::anfis::train_command(&args)?;
             eprintln!("ugv-controller: model written to {}", output.display());
             println!("{}", serde_json::to_string_pretty(&report)?);

@@ -867,4 +867,166 @@ t, x ,\"y\",label
         ensure!(report.final_training_rmse() == min);
         Ok(())
     }
+
+    #[test]
+    fn train_args_refuse_huge_epochs_mfs_and_rule_grids_before_reading_the_data() -> Result<()> {
+        // The data file does not exist: the numbers are refused before it is read.
+        let base = TrainArgs::new(
+            temp_path("never-read.csv"),
+            names(&["e_y", "e_theta", "phi_ref"]),
+            "steer_cmd".into(),
+            temp_path("never-written.json"),
+        );
+        let cases: Vec<(&str, TrainArgs)> = vec![
+            (
+                "epochs",
+                TrainArgs {
+                    epochs: usize::MAX,
+                    ..base.clone()
+                },
+            ),
+            (
+                "epochs",
+                TrainArgs {
+                    epochs: 1_000_000_000_000,
+                    ..base.clone()
+                },
+            ),
+            (
+                "epochs",
+                TrainArgs {
+                    epochs: 0,
+                    ..base.clone()
+                },
+            ),
+            (
+                "mfs",
+                TrainArgs {
+                    mfs: vec![100_000],
+                    ..base.clone()
+                },
+            ),
+            (
+                "mfs",
+                TrainArgs {
+                    mfs: vec![100_000, 100_000, 100_000],
+                    ..base.clone()
+                },
+            ),
+            (
+                "mfs",
+                TrainArgs {
+                    mfs: vec![11],
+                    ..base.clone()
+                },
+            ),
+            (
+                "mfs",
+                TrainArgs {
+                    mfs: vec![0],
+                    ..base.clone()
+                },
+            ),
+            (
+                "mfs",
+                TrainArgs {
+                    mfs: vec![usize::MAX, 2, 2],
+                    ..base.clone()
+                },
+            ),
+            (
+                "step_size",
+                TrainArgs {
+                    step_size: 1e300,
+                    ..base.clone()
+                },
+            ),
+            (
+                "step_size",
+                TrainArgs {
+                    step_size: f64::NAN,
+                    ..base.clone()
+                },
+            ),
+            (
+                "step_size",
+                TrainArgs {
+                    step_size: -0.1,
+                    ..base.clone()
+                },
+            ),
+        ];
+        for (field, args) in cases {
+            for result in [args.validate(), train_command(&args).map(|_| ())] {
+                match result {
+                    Err(AnfisError::InvalidConfig { field: f, reason }) => {
+                        ensure!(f == field, "{f} vs {field}: {reason}");
+                    }
+                    other => bail!("{field}: {:?}", other),
+                }
+            }
+        }
+        // At the bounds it is accepted: 10^3 = 1000 rules, 32 MFs on one input.
+        ensure!(
+            TrainArgs {
+                mfs: vec![10],
+                epochs: 100_000,
+                step_size: 1.0,
+                ..base.clone()
+            }
+            .validate()
+            .is_ok()
+        );
+        let one = TrainArgs {
+            inputs: names(&["x"]),
+            mfs: vec![32],
+            ..base
+        };
+        ensure!(one.validate().is_ok());
+        Ok(())
+    }
+
+    #[test]
+    fn training_configurations_are_bounded_in_the_library_too() -> Result<()> {
+        let data = sinc_data(&linspace(5, -1.0, 1.0))?;
+        let cases: [(&str, TrainConfig); 4] = [
+            (
+                "epochs",
+                TrainConfig {
+                    epochs: usize::MAX,
+                    ..TrainConfig::default()
+                },
+            ),
+            (
+                "mfs_per_input",
+                TrainConfig {
+                    mfs_per_input: vec![33],
+                    ..TrainConfig::default()
+                },
+            ),
+            (
+                "mfs_per_input",
+                TrainConfig {
+                    mfs_per_input: vec![2, 33],
+                    ..TrainConfig::default()
+                },
+            ),
+            (
+                "initial_step",
+                TrainConfig {
+                    initial_step: 2.0,
+                    ..TrainConfig::default()
+                },
+            ),
+        ];
+        for (field, config) in cases {
+            match train(&data, &config) {
+                Err(AnfisError::InvalidConfig { field: f, .. }) => {
+                    ensure!(f == field, "{f} vs {field}")
+                }
+                other => bail!("{field}: {:?}", other.map(|(_, r)| r)),
+            }
+        }
+        Ok(())
+    }
 }

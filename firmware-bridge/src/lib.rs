@@ -10,8 +10,10 @@
 //! - [`gateway`]: the CAN gateway (`ugv-bridge`) between the simulator's bus and a
 //!   physical one, routed by the DBC's senders and receivers.
 //! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
+//! - [`cli`]: bounded number parsers for the binaries' command lines.
 
 pub mod can;
+pub mod cli;
 pub mod clock;
 pub mod cola;
 pub mod gateway;

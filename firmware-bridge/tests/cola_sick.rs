@@ -253,17 +253,6 @@ fn ugv_sick_says_what_is_wrong() {
             "--range-min 5 --range-max 1",
         ),
         (
-            vec![
-                "--address",
-                &nowhere,
-                "--service",
-                &service,
-                "--frame-timeout",
-                "0",
-            ],
-            "--frame-timeout 0",
-        ),
-        (
             vec!["--address", &nowhere, "--service", "", "--no-reconnect"],
             "opening the laser service",
         ),

@@ -21,6 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use firmware_bridge::CanPort;
+use firmware_bridge::cli::number;
 use firmware_bridge::clock::WallClock;
 use ugv_controller::config::FollowerKind;
 use ugv_sim::devices::map::DeviceMap;
@@ -62,8 +63,8 @@ enum Command {
         /// The ECU's parameters come from this scenario (the paper's when absent).
         #[arg(long)]
         scenario: Option<PathBuf>,
-        /// Seconds between status lines.
-        #[arg(long, default_value_t = 1.0)]
+        /// Seconds between status lines, 0.001 to 3600.
+        #[arg(long, default_value_t = 1.0, value_parser = number(0.001, 3600.0, "seconds"))]
         status_every: f64,
     },
     /// Validate scenario files: parse, check every field, and report the first error
@@ -83,7 +84,7 @@ struct SuiteArgs {
     results: PathBuf,
     /// Parallel runs in SIL; default: the number of cores. In HIL one run per --can
     /// interface at a time.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
     jobs: Option<usize>,
     #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
     follower: FollowerKind,
@@ -116,8 +117,9 @@ struct RunArgs {
     /// where (overrides the scenario's); see the README.
     #[arg(long, value_name = "FILE")]
     devices: Option<PathBuf>,
-    /// End the run after this many seconds (overrides sim.time_limit_s).
-    #[arg(long)]
+    /// End the run after this many seconds, 0.001 to 86400 (overrides
+    /// sim.time_limit_s).
+    #[arg(long, value_parser = number(0.001, 86_400.0, "seconds"))]
     time_limit: Option<f64>,
     /// Directory for verdict.json, trace.json, figure.svg and figure.png.
     #[arg(long, default_value = "results")]
@@ -145,8 +147,8 @@ struct RunArgs {
     /// Names this run's iceoryx2 services and default GPS link.
     #[arg(long)]
     run_id: Option<String>,
-    /// Seconds between status lines.
-    #[arg(long, default_value_t = 0.5)]
+    /// Seconds between status lines, 0.001 to 3600.
+    #[arg(long, default_value_t = 0.5, value_parser = number(0.001, 3600.0, "seconds"))]
     status_every: f64,
 }
 

@@ -61,11 +61,11 @@ pub struct VmArgs {
     /// CAN interfaces to create and bring up inside (vcan0 always).
     #[arg(long = "iface", value_name = "NAME")]
     pub ifaces: Vec<String>,
-    /// Guest memory.
-    #[arg(long, default_value = "2G")]
+    /// Guest memory: a size with a unit (512M, 2G), 128M to 1024G.
+    #[arg(long, default_value = "2G", value_parser = memory_size)]
     pub memory: String,
-    /// Guest CPUs; default: as many as the host has.
-    #[arg(long)]
+    /// Guest CPUs, 1 to 256; default: as many as the host has.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
     pub cpus: Option<usize>,
     /// Further host directories the guest may write (the working directory always).
     #[arg(long, value_name = "DIR")]
@@ -76,6 +76,33 @@ pub struct VmArgs {
     /// The command and its arguments.
     #[arg(last = true, required = true, value_name = "CMD")]
     pub command: Vec<OsString>,
+}
+
+/// `--memory`: digits and a unit (K, M, G or T, as QEMU takes them), 128 MiB to
+/// 1 TiB; the text as given.
+fn memory_size(text: &str) -> Result<String, String> {
+    let refuse = || "give a size with a unit (512M, 2G) from 128M to 1024G".to_owned();
+    let split = text
+        .find(|c: char| !c.is_ascii_digit())
+        .unwrap_or(text.len());
+    let (digits, unit) = text.split_at(split);
+    let shift = match unit {
+        "K" | "k" => 10,
+        "M" | "m" => 20,
+        "G" | "g" => 30,
+        "T" | "t" => 40,
+        _ => return Err(refuse()),
+    };
+    let bytes = digits
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(1u64 << shift))
+        .ok_or_else(refuse)?;
+    if ((128u64 << 20)..=(1u64 << 40)).contains(&bytes) {
+        Ok(text.to_owned())
+    } else {
+        Err(refuse())
+    }
 }
 
 /// Arguments of the hidden `vcan-setup vm-guest` (what runs inside the VM).

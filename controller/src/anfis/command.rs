@@ -4,7 +4,10 @@ use std::path::PathBuf;
 
 use super::AnfisError;
 use super::data::{DataFormat, Dataset};
-use super::train::{ModelSelection, TrainConfig, TrainReport, train, train_with_checking};
+use super::train::{
+    ModelSelection, TrainConfig, TrainReport, check_epochs, check_grid, check_step, train,
+    train_with_checking,
+};
 
 /// Arguments of `anfis train`.
 #[derive(Clone, Debug, PartialEq)]
@@ -18,11 +21,14 @@ pub struct TrainArgs {
     pub inputs: Vec<String>,
     /// Target column name.
     pub target: String,
-    /// MFs per input (one value applies to every input).
+    /// MFs per input (one value applies to every input), each 1 to
+    /// [`MAX_MFS_PER_INPUT`](super::MAX_MFS_PER_INPUT), at most
+    /// [`MAX_RULES`](super::MAX_RULES) rules in all (their product over the inputs).
     pub mfs: Vec<usize>,
-    /// Epochs.
+    /// Epochs, 1 to [`MAX_EPOCHS`](super::MAX_EPOCHS).
     pub epochs: usize,
-    /// Jang's initial step size k (normalised units).
+    /// Jang's initial step size k (normalised units), 0 < k <=
+    /// [`MAX_INITIAL_STEP`](super::MAX_INITIAL_STEP).
     pub step_size: f64,
     /// Where the model JSON is written.
     pub output: PathBuf,
@@ -48,11 +54,27 @@ impl TrainArgs {
             checking: None,
         }
     }
+
+    /// Checks the numbers before anything is read or allocated: every MF count, the
+    /// rule grid they make over the inputs named (one count applies to each), the
+    /// epochs and the step size. Errors are [`AnfisError::InvalidConfig`] naming the
+    /// field (`mfs`, `epochs`, `step_size`) and the allowed range. With no inputs named
+    /// (every CSV column but the target) the grid is checked once the data is read.
+    pub fn validate(&self) -> Result<(), AnfisError> {
+        let grid = match (self.mfs.as_slice(), self.inputs.len()) {
+            ([m], n) if n > 0 => vec![*m; n],
+            (list, _) => list.to_vec(),
+        };
+        check_grid("mfs", &grid)?;
+        check_epochs("epochs", self.epochs)?;
+        check_step("step_size", self.step_size)
+    }
 }
 
 /// Loads the data, trains, writes the model to `args.output` and returns the report.
 /// Nothing is written when anything fails.
 pub fn train_command(args: &TrainArgs) -> Result<TrainReport, AnfisError> {
+    args.validate()?;
     let data = Dataset::load(&args.data, args.format, &args.inputs, &args.target)?;
     let checking = match &args.checking {
         Some(path) => Some(Dataset::load(

@@ -11,6 +11,25 @@ use super::model::{
     AnfisModel, InputSpec, MODEL_FORMAT, MODEL_VERSION, ModelSpec, RuleSpec, Workspace,
 };
 
+/// At most this many bell MFs on one input.
+pub const MAX_MFS_PER_INPUT: usize = 32;
+
+/// At most this many rules: the product of the inputs' MF counts (the full grid), so
+/// `mfs^inputs` with one count for every input. Jang's examples have 16 to 81; the
+/// consequent least squares grow with the square of the rules.
+pub const MAX_RULES: usize = 1024;
+
+/// At most this many epochs (a record of three numbers is kept per epoch).
+pub const MAX_EPOCHS: usize = 100_000;
+
+/// The largest initial step size k, normalised units (the inputs span [-1, 1], so a
+/// longer step jumps across the whole input range).
+pub const MAX_INITIAL_STEP: f64 = 1.0;
+
+/// At most this many cells in the least-squares design matrix (data rows times rules
+/// times inputs + 1): 2^26 cells, 512 MiB of f64.
+pub const MAX_DESIGN_CELLS: usize = 1 << 26;
+
 /// Which epoch's parameters [`train`] returns.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -29,13 +48,13 @@ pub enum ModelSelection {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
-    /// Bell MFs per input (each >= 1); one entry applies to every input. The rule grid
-    /// has their product of rules.
+    /// Bell MFs per input (each 1 to [`MAX_MFS_PER_INPUT`]); one entry applies to every
+    /// input. The rule grid has their product of rules, at most [`MAX_RULES`].
     pub mfs_per_input: Vec<usize>,
-    /// Epochs (>= 1). Epoch 0 is least squares on the initial MFs.
+    /// Epochs (1 to [`MAX_EPOCHS`]). Epoch 0 is least squares on the initial MFs.
     pub epochs: usize,
-    /// Jang's initial step size k (> 0): the length of each premise update in the
-    /// parameter space of normalised units (inputs span [-1, 1]).
+    /// Jang's initial step size k (0 < k <= [`MAX_INITIAL_STEP`]): the length of each
+    /// premise update in the parameter space of normalised units (inputs span [-1, 1]).
     pub initial_step: f64,
     /// Factor applied to k after four consecutive error decreases (Jang: 1.1).
     pub step_increase: f64,
@@ -127,6 +146,63 @@ fn positive(field: &str, value: f64) -> Result<(), AnfisError> {
     }
 }
 
+/// MF counts within 1..=[`MAX_MFS_PER_INPUT`] whose grid has at most [`MAX_RULES`]
+/// rules; returns the rule count.
+pub(super) fn check_grid(field: &str, mfs: &[usize]) -> Result<usize, AnfisError> {
+    if let Some((i, m)) = mfs
+        .iter()
+        .enumerate()
+        .find(|(_, m)| !(1..=MAX_MFS_PER_INPUT).contains(*m))
+    {
+        return Err(config_err(
+            field,
+            format!("input {i} has {m} MFs; each input takes 1 to {MAX_MFS_PER_INPUT}"),
+        ));
+    }
+    match mfs.iter().try_fold(1usize, |acc, &m| acc.checked_mul(m)) {
+        Some(rules) if rules <= MAX_RULES => Ok(rules),
+        rules => Err(config_err(
+            field,
+            format!(
+                "{} MFs over {} inputs make {} rules (their product); at most {MAX_RULES}",
+                mfs.iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" x "),
+                mfs.len(),
+                rules.map_or_else(|| "more than 2^64".to_owned(), |r| r.to_string()),
+            ),
+        )),
+    }
+}
+
+/// Epochs within 1..=[`MAX_EPOCHS`].
+pub(super) fn check_epochs(field: &str, epochs: usize) -> Result<(), AnfisError> {
+    if (1..=MAX_EPOCHS).contains(&epochs) {
+        Ok(())
+    } else {
+        Err(config_err(
+            field,
+            format!("{epochs} epochs; give 1 to {MAX_EPOCHS}"),
+        ))
+    }
+}
+
+/// An initial step within (0, [`MAX_INITIAL_STEP`]].
+pub(super) fn check_step(field: &str, step: f64) -> Result<(), AnfisError> {
+    positive(field, step)?;
+    if step <= MAX_INITIAL_STEP {
+        Ok(())
+    } else {
+        Err(config_err(
+            field,
+            format!(
+                "{step:e} is more than {MAX_INITIAL_STEP} (normalised units; inputs span [-1, 1])"
+            ),
+        ))
+    }
+}
+
 impl TrainConfig {
     /// Checks the configuration for `n_inputs` inputs and returns the MF count of each.
     fn validate(&self, n_inputs: usize) -> Result<Vec<usize>, AnfisError> {
@@ -146,10 +222,9 @@ impl TrainConfig {
         if let Some(i) = mfs.iter().position(|&m| m == 0) {
             return Err(config_err("mfs_per_input", format!("input {i} has 0 MFs")));
         }
-        if self.epochs == 0 {
-            return Err(config_err("epochs", "at least one epoch is required"));
-        }
-        positive("initial_step", self.initial_step)?;
+        check_grid("mfs_per_input", &mfs)?;
+        check_epochs("epochs", self.epochs)?;
+        check_step("initial_step", self.initial_step)?;
         positive("step_increase", self.step_increase)?;
         positive("step_decrease", self.step_decrease)?;
         positive("min_width", self.min_width)?;
@@ -354,6 +429,19 @@ fn train_impl(
     let cols = rules
         .checked_mul(width)
         .ok_or_else(|| config_err("mfs_per_input", "too many consequent parameters"))?;
+    if data
+        .len()
+        .checked_mul(cols)
+        .is_none_or(|cells| cells > MAX_DESIGN_CELLS)
+    {
+        return Err(config_err(
+            "mfs_per_input",
+            format!(
+                "{} data rows x {cols} consequent parameters ({rules} rules x {width}) exceed the least squares' bound of {MAX_DESIGN_CELLS} cells: use fewer MFs or fewer rows",
+                data.len()
+            ),
+        ));
+    }
     let targets = DVector::from_column_slice(data.targets());
     let mut design = DMatrix::<f64>::zeros(data.len(), cols);
     let mut ws = Workspace::new(model.spec());

@@ -45,12 +45,17 @@ struct Args {
     /// Write the JSON summary to this file on exit.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
-    /// Seconds between stats lines on stderr (0: none).
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
-    interval: f64,
+    /// Seconds between stats lines on stderr, 0.001 to 86400 (0: none).
+    #[arg(long, value_name = "SECONDS", default_value = "5", value_parser = firmware_bridge::cli::seconds_or_zero(0.001, 86_400.0))]
+    interval: Option<Duration>,
     /// Milliseconds a frame waits for a full transmit queue before it is given up
-    /// (and counted as dropped).
-    #[arg(long, value_name = "MS", default_value_t = GatewayConfig::default().tx_give_up_ms)]
+    /// (and counted as dropped), 0 to 60000.
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value_t = GatewayConfig::default().tx_give_up_ms,
+        value_parser = clap::value_parser!(u64).range(0..=60_000)
+    )]
     tx_give_up_ms: u64,
 }
 
@@ -80,21 +85,7 @@ fn stats_line(s: &GatewayStats) -> String {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    let interval = if args.interval == 0.0 {
-        None
-    } else {
-        Some(
-            Duration::try_from_secs_f64(args.interval)
-                .ok()
-                .filter(|d| !d.is_zero())
-                .with_context(|| {
-                    format!(
-                        "--interval {}: give a number of seconds, or 0 for no stats lines",
-                        args.interval
-                    )
-                })?,
-        )
-    };
+    let interval = args.interval;
     let (stop_tx, stop_rx) = mpsc::channel::<()>();
     ctrlc::set_handler(move || {
         let _ = stop_tx.send(());

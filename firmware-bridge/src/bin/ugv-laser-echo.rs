@@ -23,12 +23,13 @@ struct Args {
     /// use; no return and dropouts, inf and NaN on the wire, are `null`).
     #[arg(long)]
     json: bool,
-    /// Exit after this many frames.
-    #[arg(long, value_name = "N")]
+    /// Exit after this many frames (at least 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     count: Option<u64>,
-    /// Fail if no frame arrives for this many seconds (default: wait forever).
-    #[arg(long, value_name = "SECONDS")]
-    timeout: Option<f64>,
+    /// Fail if no frame arrives for this many seconds, 0.001 to 86400 (default: wait
+    /// forever).
+    #[arg(long, value_name = "SECONDS", value_parser = firmware_bridge::cli::seconds(0.001, 86_400.0))]
+    timeout: Option<Duration>,
 }
 
 fn stamp_text(stamp_ns: u64) -> String {
@@ -84,13 +85,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     // iceoryx2 warns on stderr when no config file exists; IOX2_LOG_LEVEL overrides.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let timeout = match args.timeout {
-        Some(t) if !(t.is_finite() && t > 0.0) => {
-            bail!("--timeout {t}: must be a positive number of seconds")
-        }
-        Some(t) => Some(Duration::from_secs_f64(t)),
-        None => None,
-    };
+    let timeout = args.timeout;
     let subscriber = LaserSubscriber::new(&args.service)
         .with_context(|| format!("subscribing to {}", args.service))?;
     let stdout = std::io::stdout();

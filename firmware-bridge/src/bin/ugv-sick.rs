@@ -9,7 +9,9 @@
 //!
 //! It logs in as authorized client, reads the device identity, asks for streamed
 //! scans (`sEN LMDscandata 1`) and publishes each as a `LaserFrame` (conventions in
-//! `firmware_bridge::cola`). Every `--report-interval` seconds it logs scans/s, lost
+//! `firmware_bridge::cola`). A scanner takes one controlling client at a time on the
+//! simulator's emulation (its own driver, when it runs one): a second `ugv-sick` there
+//! reads with `--no-login`. Every `--report-interval` seconds it logs scans/s, lost
 //! scans and bad telegrams. When the connection drops it reconnects once per second
 //! (or exits with status 1 with `--no-reconnect`). Ctrl-C or SIGTERM end it with
 //! status 0. Errors name the scanner's address or the service.
@@ -20,6 +22,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::Parser;
+use firmware_bridge::cli::{number_f32, seconds};
 use firmware_bridge::cola::{ClientConfig, ColaClient, ColaError, DecodeOptions};
 use firmware_bridge::laser::LaserPublisher;
 
@@ -33,43 +36,38 @@ struct Args {
     /// The iceoryx2 laser service, `ugv-hil/<run_id>/laser`.
     #[arg(long)]
     service: String,
-    /// The frames' range_min, metres (the scanner does not send it).
-    #[arg(long, value_name = "M", default_value_t = 0.5)]
+    /// The frames' range_min, metres (the scanner does not send it), 0 to 1000.
+    #[arg(long, value_name = "M", default_value_t = 0.5, value_parser = number_f32(0.0, 1000.0, "m"))]
     range_min: f32,
-    /// The frames' range_max, metres (LMS111: 20, LMS511: 80).
-    #[arg(long, value_name = "M", default_value_t = 20.0)]
+    /// The frames' range_max, metres (LMS111: 20, LMS511: 80), 0 to 1000.
+    #[arg(long, value_name = "M", default_value_t = 20.0, value_parser = number_f32(0.0, 1000.0, "m"))]
     range_max: f32,
-    /// Do not log in as authorized client first.
+    /// Do not log in: read only (scans, DeviceIdent). A scanner serves any number of
+    /// reading clients, and one that logs in.
     #[arg(long)]
     no_login: bool,
-    /// Send LMCstartmeas and Run before streaming (a scanner left stopped).
-    #[arg(long)]
+    /// Send LMCstartmeas and Run before streaming (a scanner left stopped; needs the
+    /// login).
+    #[arg(long, conflicts_with = "no_login")]
     start_measurement: bool,
     /// Stamp scans with this host's clock even when the scanner sends a time stamp.
     #[arg(long)]
     host_stamps: bool,
-    /// Seconds allowed for connecting and for each answer.
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
-    connect_timeout: f64,
-    /// Warn when no scan arrives for this many seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
-    frame_timeout: f64,
-    /// Seconds between the scans/s log lines.
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
-    report_interval: f64,
+    /// Seconds allowed for connecting and for each answer, 0.001 to 3600.
+    #[arg(long, value_name = "SECONDS", default_value = "5", value_parser = seconds(0.001, 3600.0))]
+    connect_timeout: Duration,
+    /// Warn when no scan arrives for this many seconds, 0.001 to 3600.
+    #[arg(long, value_name = "SECONDS", default_value = "2", value_parser = seconds(0.001, 3600.0))]
+    frame_timeout: Duration,
+    /// Seconds between the scans/s log lines, 0.001 to 86400.
+    #[arg(long, value_name = "SECONDS", default_value = "5", value_parser = seconds(0.001, 86_400.0))]
+    report_interval: Duration,
     /// Exit with status 1 when the connection fails or drops, instead of retrying.
     #[arg(long)]
     no_reconnect: bool,
-    /// Exit after publishing this many scans.
-    #[arg(long, value_name = "N")]
+    /// Exit after publishing this many scans (at least 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     count: Option<u64>,
-}
-
-fn seconds(name: &str, value: f64) -> anyhow::Result<Duration> {
-    if !(value.is_finite() && value > 0.0) {
-        bail!("--{name} {value}: must be a positive number of seconds");
-    }
-    Ok(Duration::from_secs_f64(value))
 }
 
 /// Counters between two report lines and in total.
@@ -121,9 +119,9 @@ fn run(args: &Args) -> anyhow::Result<()> {
             args.range_max
         );
     }
-    let timeout = seconds("connect-timeout", args.connect_timeout)?;
-    let frame_timeout = seconds("frame-timeout", args.frame_timeout)?;
-    let report_interval = seconds("report-interval", args.report_interval)?;
+    let timeout = args.connect_timeout;
+    let frame_timeout = args.frame_timeout;
+    let report_interval = args.report_interval;
     let config = ClientConfig {
         connect_timeout: timeout,
         reply_timeout: timeout,
