@@ -556,6 +556,15 @@ impl Ctx<'_> {
         }
     }
 
+    /// A number the nmea crate parsed as f32: beyond f32 it comes out infinite (a field
+    /// of 40 digits is enough), which the reading must not carry.
+    fn finite_f32(&self, i: usize, v: Option<f32>) -> Result<Option<f64>, SentenceError> {
+        match v {
+            Some(x) if !x.is_finite() => Err(self.malformed(i, "not a finite number")),
+            v => Ok(v.map(f64::from)),
+        }
+    }
+
     fn opt_char<T>(
         &self,
         i: usize,
@@ -637,7 +646,6 @@ impl Ctx<'_> {
 
     fn with_nmea_crate(&self, kind: SentenceKind) -> Result<Decoded, SentenceError> {
         let parsed = nmea::parse_str(self.text).map_err(|e| self.crate_error(&e))?;
-        let f32_ = |v: Option<f32>| v.map(f64::from);
         let decoded = match (kind, parsed) {
             (SentenceKind::Gga, nmea::ParseResult::GGA(g)) => {
                 let quality = match g.fix_type {
@@ -666,10 +674,10 @@ impl Ctx<'_> {
                     quality,
                     lat,
                     lon,
-                    alt: f32_(g.altitude),
-                    geoid: f32_(g.geoid_separation),
+                    alt: self.finite_f32(9, g.altitude)?,
+                    geoid: self.finite_f32(11, g.geoid_separation)?,
                     sats,
-                    hdop: f32_(g.hdop),
+                    hdop: self.finite_f32(8, g.hdop)?,
                     age,
                     station,
                 })
@@ -681,8 +689,10 @@ impl Ctx<'_> {
                     valid: r.status_of_fix != nmea::sentences::rmc::RmcStatusOfFix::Invalid,
                     lat,
                     lon,
-                    speed_mps: f32_(r.speed_over_ground).map(|kn| kn / KNOTS_PER_MPS),
-                    course: f32_(r.true_course),
+                    speed_mps: self
+                        .finite_f32(7, r.speed_over_ground)?
+                        .map(|kn| kn / KNOTS_PER_MPS),
+                    course: self.finite_f32(8, r.true_course)?,
                     date: r.fix_date,
                     mode: self.opt_char(12, "mode indicator", PositioningMode::from_char)?,
                     nav: self.opt_char(
@@ -693,43 +703,45 @@ impl Ctx<'_> {
                 })
             }
             (SentenceKind::Vtg, nmea::ParseResult::VTG(v)) => Decoded::Vtg(Vtg {
-                course: f32_(v.true_course),
-                speed_mps: f32_(v.speed_over_ground).map(|kn| kn / KNOTS_PER_MPS),
+                course: self.finite_f32(1, v.true_course)?,
+                speed_mps: self
+                    .finite_f32(5, v.speed_over_ground)?
+                    .map(|kn| kn / KNOTS_PER_MPS),
                 mode: self.opt_char(9, "mode indicator", PositioningMode::from_char)?,
             }),
             (SentenceKind::Gst, nmea::ParseResult::GST(g)) => {
                 let accuracy = match (
-                    g.rms_sd,
-                    g.ellipse_semi_major_sd,
-                    g.ellipse_semi_minor_sd,
-                    g.err_ellipse_orientation,
-                    g.lat_sd,
-                    g.long_sd,
-                    g.alt_sd,
+                    self.finite_f32(2, g.rms_sd)?,
+                    self.finite_f32(3, g.ellipse_semi_major_sd)?,
+                    self.finite_f32(4, g.ellipse_semi_minor_sd)?,
+                    self.finite_f32(5, g.err_ellipse_orientation)?,
+                    self.finite_f32(6, g.lat_sd)?,
+                    self.finite_f32(7, g.long_sd)?,
+                    self.finite_f32(8, g.alt_sd)?,
                 ) {
                     (
-                        Some(rms),
-                        Some(maj),
-                        Some(min),
-                        Some(ori),
-                        Some(lat),
-                        Some(lon),
-                        Some(alt),
+                        Some(rms_m),
+                        Some(semi_major_m),
+                        Some(semi_minor_m),
+                        Some(orientation_deg),
+                        Some(lat_sigma_m),
+                        Some(lon_sigma_m),
+                        Some(alt_sigma_m),
                     ) => Some(Accuracy {
-                        rms_m: f64::from(rms),
-                        semi_major_m: f64::from(maj),
-                        semi_minor_m: f64::from(min),
-                        orientation_deg: f64::from(ori),
-                        lat_sigma_m: f64::from(lat),
-                        lon_sigma_m: f64::from(lon),
-                        alt_sigma_m: f64::from(alt),
+                        rms_m,
+                        semi_major_m,
+                        semi_minor_m,
+                        orientation_deg,
+                        lat_sigma_m,
+                        lon_sigma_m,
+                        alt_sigma_m,
                     }),
                     _ => None,
                 };
                 Decoded::Gst(g.time, accuracy)
             }
             (SentenceKind::Hdt, nmea::ParseResult::HDT(h)) => {
-                let heading = f32_(h.heading);
+                let heading = self.finite_f32(1, h.heading)?;
                 if heading.is_some_and(|h| !(0.0..=360.0).contains(&h)) {
                     return Err(self.malformed(1, "outside 0-360 degrees"));
                 }
@@ -764,5 +776,58 @@ fn quality_of(t: FixType) -> FixQuality {
         FixType::Estimated => FixQuality::Estimated,
         FixType::Manual => FixQuality::Manual,
         FixType::Simulation => FixQuality::Simulator,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sentence(body: &str) -> String {
+        format!("${body}*{:02X}\r\n", checksum(body.as_bytes()))
+    }
+
+    fn read(text: &str) -> Vec<ReadEvent> {
+        let mut reader = NmeaReader::default();
+        let mut events: Vec<ReadEvent> = reader.feed(text.as_bytes()).collect();
+        events.extend(reader.flush());
+        events
+    }
+
+    /// Found by fuzzing (nmea_stream): the nmea crate parses its f32 fields without a
+    /// bound, so 44 digits came out as an infinite course, speed, height, HDOP or sigma,
+    /// and the reading carried it on to the localiser (an infinite course is a NaN
+    /// heading). Each such field is now a malformed sentence naming it.
+    #[test]
+    fn numbers_beyond_f32_are_malformed_fields_not_infinite_readings() {
+        let big = "9".repeat(40);
+        let cases = [
+            (format!("GPRMC,000000.00,A,,,,,0.004,{big},091202,,,A"), 8),
+            (format!("GPRMC,000000.00,A,,,,,{big},77.52,091202,,,A"), 7),
+            (format!("GPVTG,{big},T,,M,0.004,N,0.008,K,A"), 1),
+            (format!("GPVTG,77.52,T,,M,{big},N,0.008,K,A"), 5),
+            (format!("GPGGA,092725.00,,,,,1,08,1.01,{big},M,48.0,M,,"), 9),
+            (
+                format!("GPGGA,092725.00,,,,,1,08,1.01,499.6,M,{big},M,,"),
+                11,
+            ),
+            (
+                format!("GPGGA,092725.00,,,,,1,08,{big},499.6,M,48.0,M,,"),
+                8,
+            ),
+            (format!("GPGST,082356.00,1.8,{big},1.0,30,1.7,1.3,2.2"), 3),
+            (format!("GPGST,082356.00,1.8,1.0,1.0,30,1.7,1.3,{big}"), 8),
+            (format!("HEHDT,{big},T"), 1),
+        ];
+        for (body, field) in cases {
+            let events = read(&sentence(&body));
+            assert!(
+                matches!(
+                    &events[..],
+                    [ReadEvent::Error(SentenceError::MalformedField { field: f, .. })] if *f == field
+                ),
+                "{body}: {events:?}"
+            );
+        }
     }
 }
