@@ -30,7 +30,7 @@ fn main() -> Result<()> {
 
 /// `STEERING_CMD` -> `SteeringCmd`, `command_timeout` -> `CommandTimeout`.
 fn camel(name: &str) -> String {
-    name.split(|c: char| c == '_' || c == ' ' || c == '-')
+    name.split(['_', ' ', '-'])
         .filter(|w| !w.is_empty())
         .map(|w| {
             let lower = w.to_ascii_lowercase();

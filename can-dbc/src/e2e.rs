@@ -327,10 +327,10 @@ impl<'n> E2eRx<'n> {
             Err(E2eError::SkippedCounter { .. }) => Some(CounterVerdict::Skipped),
             Err(_) => None,
         };
-        if let (Some(verdict), Some(k)) = (verdict, key) {
-            if self.watch.entry(k).or_default().observe(verdict) {
-                self.stats.second_sender += 1;
-            }
+        if let (Some(verdict), Some(k)) = (verdict, key)
+            && self.watch.entry(k).or_default().observe(verdict)
+        {
+            self.stats.second_sender += 1;
         }
         self.stats.count(&result);
         result

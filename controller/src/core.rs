@@ -209,6 +209,12 @@ impl Controller {
         }
     }
 
+    /// Replan if due, then follow the current plan from `pose`.
+    fn plan_and_follow(&mut self, now: f64, pose: &Pose) -> Guidance {
+        self.plan(now, pose);
+        self.nav.follow(pose)
+    }
+
     pub fn mode(&self) -> &Mode {
         &self.mode
     }
@@ -241,11 +247,11 @@ impl Controller {
     /// A frame from the bus.
     pub fn on_can(&mut self, now: f64, received: &Received) {
         // Commands it did not send: estop at once, in any mode, keeping the first.
-        if let Some(f) = self.watch.on_can(now, received) {
-            if !matches!(self.mode, Mode::Estop { .. }) {
-                self.estop(f.code, f.reason);
-                self.fault_detail = f.detail;
-            }
+        if let Some(f) = self.watch.on_can(now, received)
+            && !matches!(self.mode, Mode::Estop { .. })
+        {
+            self.estop(f.code, f.reason);
+            self.fault_detail = f.detail;
         }
         let Received::Message(m) = received else {
             return;
@@ -463,10 +469,7 @@ impl Controller {
                         (true, hold),
                         (true, 0.0, 50.0),
                     ),
-                    Some(pose) => match {
-                        self.plan(now, &pose);
-                        self.nav.follow(&pose)
-                    } {
+                    Some(pose) => match self.plan_and_follow(now, &pose) {
                         Guidance::Drive {
                             steer,
                             speed,

@@ -2,6 +2,9 @@
 //! the file, line and field named (issue 11, finding 1: a NaN laser yaw passed
 //! `check-config` and `run`, and the car drove the paper scenario blind).
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use ugv_controller::config::{ConfigError, ControllerConfig};
 use ugv_controller::core::{Controller, ControllerError};
 

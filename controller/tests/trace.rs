@@ -1,6 +1,9 @@
 //! The controller's trace is written while it drives (issue 11, finding 3: it was
 //! written only at a clean exit, so SIGKILL or a crash left nothing).
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use std::io::Write;
 
 use ugv_controller::config::ControllerConfig;
@@ -109,6 +112,6 @@ fn a_full_disk_does_not_stop_the_writer_from_reporting_it() {
     let mut ctl = Controller::new(&ControllerConfig::default()).expect("controller");
     let mut w = TraceWriter::new(Some(Full), None).expect("writer");
     ctl.samples.push(sample(0.0));
-    let e = w.update(0.0, &ctl, &[]).err().expect("an error");
+    let e = w.update(0.0, &ctl, &[]).expect_err("an error");
     assert!(e.to_string().contains("no space"), "{e}");
 }

@@ -3,6 +3,9 @@
 //! (which gave false collisions at t = 0), and what `run` refused while `check`
 //! accepted it.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use ugv_sim::ScenarioError;
 use ugv_sim::scenario::Scenario;
 

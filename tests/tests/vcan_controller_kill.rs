@@ -77,9 +77,22 @@ fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> 
         {
             break pid;
         }
+        if let Some(status) = sim.try_wait()? {
+            let out = sim.wait_with_output()?;
+            bail!(
+                "ugv-sim ended ({status}) before the controller drove {kill_after_samples} ticks:\n{}\n{}",
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
         if started.elapsed() > Duration::from_secs(90) {
             let _ = sim.kill();
-            bail!("the controller did not drive {kill_after_samples} ticks within 90 s");
+            let out = sim.wait_with_output()?;
+            bail!(
+                "the controller did not drive {kill_after_samples} ticks within 90 s ({} written):\n{}",
+                samples_written(&trace),
+                String::from_utf8_lossy(&out.stderr)
+            );
         }
         std::thread::sleep(Duration::from_millis(10));
     };

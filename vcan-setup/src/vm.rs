@@ -149,7 +149,7 @@ pub fn default_kernel() -> Result<PathBuf, VcanError> {
             Some((release, e.path()))
         })
         .collect();
-    candidates.sort_by(|a, b| version_key(&a.0).cmp(&version_key(&b.0)));
+    candidates.sort_by_key(|c| version_key(&c.0));
     candidates.pop().map(|(_, p)| p).ok_or_else(|| {
         VcanError::Vm(format!(
             "no kernel image in /boot with a vcan module under /lib/modules: install linux-image-amd64 ({INSTALL_HINT})"
@@ -370,13 +370,10 @@ pub fn guest(args: &GuestArgs) -> Result<u8, VcanError> {
             source,
         })?;
     // A command killed by a signal reports 128 + signal, as a shell would.
-    let code = status.code().map_or_else(
-        || {
-            use std::os::unix::process::ExitStatusExt;
-            128 + status.signal().unwrap_or(0)
-        },
-        |c| c,
-    );
+    let code = status.code().unwrap_or_else(|| {
+        use std::os::unix::process::ExitStatusExt;
+        128 + status.signal().unwrap_or(0)
+    });
     let code = u8::try_from(code).unwrap_or(1);
     std::fs::write(args.status_dir.join("exit-code"), code.to_string()).map_err(|source| {
         VcanError::Io {
