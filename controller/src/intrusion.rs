@@ -617,10 +617,10 @@ mod tests {
                 watch.commanded(now, &[throttle_cmd(enable, speed)], 0.0);
                 plant.command(now, enable, forged(now, speed));
             }
-            if k % 10 == 5 {
-                if let Some(f) = watch.on_can(now, &throttle_report(plant)) {
-                    return Some((now, f));
-                }
+            if k % 10 == 5
+                && let Some(f) = watch.on_can(now, &throttle_report(plant))
+            {
+                return Some((now, f));
             }
         }
         None

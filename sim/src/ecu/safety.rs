@@ -151,9 +151,17 @@ impl Safety {
             Cause::CommandTimeout,
         ];
         let kept = self.latched.filter(|c| self.holds(*c, now));
-        let current = kept.or_else(|| ORDER.into_iter().find(|c| self.holds(*c, now)));
-        if self.latched.is_none() {
-            if let Some(cause) = current {
+        // A second sender overrides whatever else the ECU is safe for, so its report
+        // and FAULT_REPORT name the intruder.
+        let current = if self.holds(Cause::SecondSender, now) {
+            Some(Cause::SecondSender)
+        } else {
+            kept.or_else(|| ORDER.into_iter().find(|c| self.holds(*c, now)))
+        };
+        if let Some(cause) = current {
+            let entered = self.latched.is_none()
+                || (cause == Cause::SecondSender && self.latched != Some(cause));
+            if entered {
                 self.enabled = false;
                 self.trips[cause as usize] += 1;
             }
@@ -292,6 +300,21 @@ mod tests {
         drive(&mut s, 0.9, 0.95, true);
         assert!(s.enabled());
         assert_eq!(s.trips[Cause::SecondSender as usize], 1);
+    }
+
+    #[test]
+    fn a_second_sender_overrides_the_cause_an_ecu_was_already_safe_for() {
+        let mut s = Safety::new(timing());
+        drive(&mut s, 0.0, 0.02, false);
+        drive(&mut s, 0.02, 0.2, true);
+        s.on_heartbeat(0.2, Estop);
+        assert_eq!(s.fault(), Some(Cause::Estop));
+        s.on_second_sender(0.21);
+        assert_eq!(s.fault(), Some(Cause::SecondSender));
+        assert_eq!(s.trips[Cause::Estop as usize], 1);
+        assert_eq!(s.trips[Cause::SecondSender as usize], 1);
+        s.on_second_sender(0.22);
+        assert_eq!(s.trips[Cause::SecondSender as usize], 1, "counted once");
     }
 
     #[test]

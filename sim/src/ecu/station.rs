@@ -301,16 +301,17 @@ mod tests {
             }
         }
 
-        /// Step 5 ms; `command` is the controller's STEERING_CMD of this step (sent
-        /// on even steps), `forge` answers it with the next counter and 35 degrees.
+        /// Step 5 ms: the controller's STEERING_CMD on even steps (reaching the bus when
+        /// `send_command`), and with `forge` a forger's answer to it carrying the next
+        /// counter and 35 degrees.
         fn step(&mut self, send_command: bool, forge: bool) {
             let now = self.k as f64 * 0.005;
-            if self.k % 4 == 0 {
+            if self.k.is_multiple_of(4) {
                 let _ = self.controller.send(&ControllerHeartbeat {
                     state: ControllerHeartbeatState::Auto,
                 });
             }
-            if self.k % 2 == 0 {
+            if self.k.is_multiple_of(2) {
                 let cmd = SteeringCmd {
                     enable: now > 0.05,
                     target_angle: 2.0,
