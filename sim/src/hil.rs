@@ -478,6 +478,10 @@ pub struct HilOptions {
     pub results: PathBuf,
     /// Simulated seconds between status calls.
     pub status_every: f64,
+    /// Run in a private network namespace of this name (`--isolate`, see
+    /// [`crate::isolate`]): the CAN interface is created there, and no process
+    /// outside can open it.
+    pub isolate: Option<String>,
 }
 
 /// Run `scenario` in HIL with the controller configured by `config`: open the wires,
@@ -511,6 +515,14 @@ pub fn run_scenario(
                 .to_owned(),
         ));
     }
+    // --isolate: this thread, its sockets and the controller it starts live in a
+    // private network namespace from here to the end of the run (the guard's drop).
+    let _isolated = match &options.isolate {
+        Some(name) => {
+            Some(crate::isolate::enter(sc, name, log).map_err(|e| HilError::Setup(e.to_string()))?)
+        }
+        None => None,
+    };
     let iface = sc.can.interface.clone();
     let open = |what: &str| {
         CanPort::open(&iface).map_err(|source| HilError::Can {

@@ -5,6 +5,7 @@
 
 pub mod epoch;
 pub mod hil;
+pub mod isolate;
 /// Ticks on absolute deadlines and lockstep (shared with the controller).
 pub use firmware_bridge::clock;
 pub mod devices;

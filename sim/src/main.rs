@@ -83,7 +83,7 @@ struct SuiteArgs {
     #[arg(long, default_value = "results/suite")]
     results: PathBuf,
     /// Parallel runs in SIL; default: the number of cores. In HIL one run per --can
-    /// interface at a time.
+    /// interface at a time, or N isolated runs (--isolate; default 1).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
     jobs: Option<usize>,
     #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
@@ -100,6 +100,11 @@ struct SuiteArgs {
     /// N interfaces run N scenarios in parallel. Default: each scenario's own.
     #[arg(long = "can")]
     cans: Vec<String>,
+    /// With --hil: each run in a private network namespace of its own, its CAN
+    /// interface created there, so no other process can open it (needs root); runs
+    /// then never share a bus, and --jobs N runs N at a time.
+    #[arg(long)]
+    isolate: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -150,6 +155,11 @@ struct RunArgs {
     /// Seconds between status lines, 0.001 to 3600.
     #[arg(long, default_value_t = 0.5, value_parser = number(0.001, 3600.0, "seconds"))]
     status_every: f64,
+    /// HIL in a private network namespace (ugv-RUN_ID): the CAN interface is created
+    /// there, with the simulator and the controller, and no other process can open it
+    /// (needs root). Look in with `sudo ip netns exec ugv-RUN_ID candump IFACE`.
+    #[arg(long)]
+    isolate: bool,
 }
 
 fn main() -> ExitCode {
@@ -314,6 +324,10 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         .with_context(|| format!("creating {}", args.results.display()))?;
     eprintln!("ugv-sim: scenario {:?}: {}", sc.name, sc.description);
 
+    anyhow::ensure!(
+        !(args.sil && args.isolate),
+        "--isolate is for HIL runs (SIL has no wires)"
+    );
     if args.sil {
         let started = std::time::Instant::now();
         let run = ugv_sim::sil::run_sil(sc.clone(), &cfg)?;
@@ -346,6 +360,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         controller_args: args.controller_args.clone(),
         wait_for_controller: args.wait_for_controller,
         gps_link: args.gps_link.clone(),
+        isolate: args.isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
         run_id,
         results: args.results.clone(),
         status_every: args.status_every,
@@ -389,6 +404,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         hil,
         controller,
         cans,
+        isolate,
     } = args;
     let files =
         suite::scenario_files(&dir).with_context(|| format!("reading {}", dir.display()))?;
@@ -400,6 +416,10 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
     anyhow::ensure!(
         hil || (controller.is_none() && cans.is_empty()),
         "--controller and --can are for --hil runs"
+    );
+    anyhow::ensure!(
+        hil || !isolate,
+        "--isolate is for --hil runs (SIL has no wires)"
     );
     let total = files.len();
     let tune = move |sc: &Scenario| {
@@ -421,12 +441,14 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         let stem = file
             .file_stem()
             .map_or_else(|| sc.name.clone(), |s| s.to_string_lossy().into_owned());
+        let run_id = format!("suite-{stem}-{}", std::process::id());
         let options = HilOptions {
             controller: Some(controller.clone()),
             controller_args: Vec::new(),
             wait_for_controller: false,
             gps_link: None,
-            run_id: format!("suite-{stem}-{}", std::process::id()),
+            isolate: isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
+            run_id,
             results: results.join(&stem),
             status_every: 1.0,
         };
@@ -441,7 +463,13 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             "{} is not a file (--controller)",
             controller.display()
         );
-        (&hil_runner, cans.len().max(1))
+        // Isolated runs each have a bus of their own; otherwise one per interface.
+        let parallel = if isolate {
+            jobs.unwrap_or(1)
+        } else {
+            cans.len().max(1)
+        };
+        (&hil_runner, parallel)
     } else {
         (
             &sil,

@@ -64,6 +64,7 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
             "skipped_counter",
             "wrong_dlc",
             "unknown_id",
+            "second_sender",
         ] {
             ensure!(e2e[key] == 0, "{node}: {key} = {}", e2e[key]);
         }

@@ -1,7 +1,9 @@
 //! vcan tooling: create, raise, delete and inspect virtual CAN interfaces over
 //! netlink, and ([`vm`]) run a command inside a throwaway VM whose stock kernel has
-//! CAN, for hosts whose kernel has none (WSL2, most CI runners, this project's own).
+//! CAN, for hosts whose kernel has none (WSL2, most CI runners, this project's own);
+//! ([`netns`]) a private network namespace for a run's interfaces.
 
+pub mod netns;
 pub mod vm;
 
 use std::path::{Path, PathBuf};
@@ -33,6 +35,25 @@ pub enum VcanError {
         iface: String,
         #[source]
         source: socketcan::Error,
+    },
+    #[error(
+        "{name:?} is not a valid network namespace name (1 to 64 of A-Z a-z 0-9 . _ -, not starting with a dot)"
+    )]
+    BadNetnsName { name: String },
+    #[error(
+        "{action} network namespace {name} needs CAP_SYS_ADMIN: run as root (sudo), or run without isolation"
+    )]
+    NetnsPermission { name: String, action: &'static str },
+    #[error(
+        "network namespace {name} exists already (another run, or one that did not clean up: sudo ip netns delete {name})"
+    )]
+    NetnsExists { name: String },
+    #[error("{action} network namespace {name}: {source}")]
+    Netns {
+        name: String,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
     },
     #[error("{0}")]
     Vm(String),
