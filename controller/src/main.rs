@@ -68,7 +68,8 @@ struct RunArgs {
     /// GPS serial device or pty link.
     #[arg(long)]
     gps: PathBuf,
-    #[arg(long, default_value_t = 115_200)]
+    /// Baud rate of the GPS line (300 to 4,000,000).
+    #[arg(long, default_value_t = 115_200, value_parser = clap::value_parser!(u32).range(300..=4_000_000))]
     baud: u32,
     /// iceoryx2 service of the laser frames.
     #[arg(long)]
@@ -217,9 +218,8 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     let ctl = Controller::new(&cfg)?
         .with_planning_thread()
         .context("starting the planning thread")?;
-    let create = |p: &PathBuf| {
-        std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))
-    };
+    let create =
+        |p: &PathBuf| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
     let trace = match (&args.trace, &args.record) {
         (None, None) => None,
         (trace, record) => Some(

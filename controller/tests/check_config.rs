@@ -72,3 +72,25 @@ fn check_config_refuses_what_run_refuses_naming_file_line_and_field() -> Result<
     ensure!(code == Some(0), "a valid file passes: {stdout_err}");
     Ok(())
 }
+
+#[test]
+fn run_refuses_a_baud_rate_out_of_range_naming_it() -> Result<()> {
+    let out = Command::new(env!("CARGO_BIN_EXE_ugv-controller"))
+        .args([
+            "run",
+            "--gps",
+            "/nonexistent",
+            "--laser",
+            "x",
+            "--baud",
+            "99999999999",
+        ])
+        .output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    ensure!(out.status.code() == Some(2), "{:?} {stderr}", out.status);
+    ensure!(
+        stderr.contains("--baud") && stderr.contains("300..=4000000"),
+        "{stderr}"
+    );
+    Ok(())
+}
