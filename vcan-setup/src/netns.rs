@@ -77,6 +77,22 @@ pub fn name_for(text: &str) -> String {
     name
 }
 
+/// An I/O error of `action`, a permission error named as one.
+fn io_error(name: &str, action: &'static str, source: std::io::Error) -> VcanError {
+    if source.kind() == std::io::ErrorKind::PermissionDenied {
+        VcanError::NetnsPermission {
+            name: name.to_owned(),
+            action,
+        }
+    } else {
+        VcanError::Netns {
+            name: name.to_owned(),
+            action,
+            source,
+        }
+    }
+}
+
 fn ns_error(name: &str, action: &'static str, errno: Errno) -> VcanError {
     match errno {
         Errno::EPERM | Errno::EACCES => VcanError::NetnsPermission {
@@ -94,11 +110,8 @@ fn ns_error(name: &str, action: &'static str, errno: Errno) -> VcanError {
 /// Make the run directory a shared mount point, as iproute2 does, so namespaces
 /// mounted there are seen from other mount namespaces too.
 fn prepare_run_dir(name: &str) -> Result<(), VcanError> {
-    std::fs::create_dir_all(NETNS_RUN_DIR).map_err(|source| VcanError::Netns {
-        name: name.to_owned(),
-        action: "creating /run/netns for",
-        source,
-    })?;
+    std::fs::create_dir_all(NETNS_RUN_DIR)
+        .map_err(|e| io_error(name, "creating /run/netns for", e))?;
     let shared = || {
         mount(
             None::<&str>,
@@ -155,13 +168,7 @@ impl NetNs {
                     name: name.to_owned(),
                 });
             }
-            Err(source) => {
-                return Err(VcanError::Netns {
-                    name: name.to_owned(),
-                    action: "creating the mount point of",
-                    source,
-                });
-            }
+            Err(e) => return Err(io_error(name, "creating the mount point of", e)),
         }
         let undo_file = |e: VcanError| {
             let _ = std::fs::remove_file(&path);
