@@ -4,10 +4,11 @@
 //! ms after the kill, with the car still at 2 m/s and no timing). The controller's
 //! trace, written while it drove, is still read (finding 3).
 //!
-//! `UGV_KILL_TRIALS` (default 3) trials, the kill moving through the run; the
-//! distribution is printed. Needs vcan (fails loudly without it).
+//! `UGV_KILL_TRIALS` (default 1, as the README's test command runs it; the
+//! measurement in the closing note used 20) trials, the kill moving through the run;
+//! the distribution is printed. Needs vcan (fails loudly without it).
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
@@ -43,6 +44,11 @@ struct Trial {
     stop_after_s: f64,
 }
 
+/// A file of the trial's folder, as text (empty when missing).
+fn read(dir: &tempfile::TempDir, name: &str) -> String {
+    std::fs::read_to_string(dir.path().join(name)).unwrap_or_default()
+}
+
 /// Control ticks the controller has driven, from the trace it writes as it goes.
 fn samples_written(trace: &std::path::Path) -> usize {
     std::fs::read_to_string(trace)
@@ -63,8 +69,10 @@ fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> 
         .arg(&results)
         .arg("--gps-link")
         .arg(dir.path().join("gps"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        // Files, not pipes: nobody reads a pipe while the run goes, and the status
+        // lines of ugv-sim and its controller would fill it and block them.
+        .stdout(std::fs::File::create(dir.path().join("stdout"))?)
+        .stderr(std::fs::File::create(dir.path().join("stderr"))?)
         .spawn()
         .context("starting ugv-sim")?;
     // Kill the controller once it has driven for a while (its trace, written as it
@@ -78,20 +86,18 @@ fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> 
             break pid;
         }
         if let Some(status) = sim.try_wait()? {
-            let out = sim.wait_with_output()?;
             bail!(
-                "ugv-sim ended ({status}) before the controller drove {kill_after_samples} ticks:\n{}\n{}",
-                String::from_utf8_lossy(&out.stdout),
-                String::from_utf8_lossy(&out.stderr)
+                "ugv-sim ended ({status}) before the controller drove {kill_after_samples} ticks:\n{}",
+                read(&dir, "stderr")
             );
         }
         if started.elapsed() > Duration::from_secs(90) {
             let _ = sim.kill();
-            let out = sim.wait_with_output()?;
+            let _ = sim.wait();
             bail!(
                 "the controller did not drive {kill_after_samples} ticks within 90 s ({} written):\n{}",
                 samples_written(&trace),
-                String::from_utf8_lossy(&out.stderr)
+                read(&dir, "stderr")
             );
         }
         std::thread::sleep(Duration::from_millis(10));
@@ -101,14 +107,13 @@ fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> 
         nix::sys::signal::Signal::SIGKILL,
     )
     .context("SIGKILL to the controller")?;
-    let out = sim.wait_with_output().context("waiting for ugv-sim")?;
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let verdict: serde_json::Value = serde_json::from_slice(&out.stdout)
+    let status = sim.wait().context("waiting for ugv-sim")?;
+    let stderr = read(&dir, "stderr");
+    let verdict: serde_json::Value = serde_json::from_str(&read(&dir, "stdout"))
         .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
     ensure!(
-        out.status.code() == Some(3),
-        "ugv-sim exit {:?} (3: stopped); stderr:\n{stderr}",
-        out.status
+        status.code() == Some(3),
+        "ugv-sim exit {status:?} (3: stopped); stderr:\n{stderr}"
     );
     let s = &verdict["safe_state"];
     ensure!(s.is_object(), "no safe_state in the verdict:\n{verdict:#}");
@@ -165,7 +170,7 @@ fn a_controller_killed_mid_run_leaves_both_ecus_safe_within_timeout_plus_one_per
     let trials: usize = std::env::var("UGV_KILL_TRIALS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(3)
+        .unwrap_or(1)
         .clamp(1, 100);
     let vcan = TestVcan::new("kill")?;
     let mut all = Vec::new();
