@@ -414,6 +414,7 @@ mod tests {
             }
         }
         let frames = found_after.unwrap_or(usize::MAX);
+        eprintln!("second sender found after {frames} frames");
         assert!(frames <= 8, "found after {frames} frames");
         assert_eq!(rx.second_sender(), Some(SteeringCmd::ID));
         let s = rx.stats();

@@ -538,6 +538,10 @@ mod tests {
             &|now, t| if now >= 2.0 { 35.0 } else { t },
         );
         let (t, f) = found.expect("found");
+        eprintln!(
+            "forged steering target from 2.0 s found at {t:.3} s, wheels at {:.1} deg",
+            plant.value
+        );
         assert_eq!(f.code, FaultReportCode::UnexpectedActuation);
         assert!((2.0..2.5).contains(&t), "found at {t}: {f:?}");
         assert!(plant.value < 15.0, "the wheels got to {}", plant.value);
@@ -556,6 +560,10 @@ mod tests {
             }
         });
         let (t, f) = found.expect("found");
+        eprintln!(
+            "wheels turned under a hold from 3.0 s found at {t:.3} s, at {:.1} deg",
+            plant.value
+        );
         assert_eq!(f.code, FaultReportCode::UnexpectedActuation);
         assert!((3.0..3.5).contains(&t), "found at {t}: {f:?}");
     }
@@ -654,6 +662,10 @@ mod tests {
             if now >= 5.0 { 6.0 } else { s }
         });
         let (t, f) = found.expect("found");
+        eprintln!(
+            "forged target speed from 5.0 s found at {t:.3} s, at {:.2} m/s",
+            plant.value
+        );
         assert_eq!(f.code, FaultReportCode::UnexpectedActuation);
         assert!((5.0..6.0).contains(&t), "found at {t}: {f:?}");
         assert!(plant.value < 2.5, "the car got to {} m/s", plant.value);

@@ -377,6 +377,7 @@ mod tests {
         assert_eq!(stats.safe_state_trips[Cause::SecondSender as usize], 1);
         // Found within a few frames: the wheels barely moved towards the forged 35 deg.
         let angle = b.station.actuator().0.to_degrees();
+        eprintln!("wheels {before:.2} -> {angle:.2} deg before the safe state");
         assert!(angle - before < 3.0, "{before} -> {angle}");
         let reports = b.fault_reports();
         assert!(
