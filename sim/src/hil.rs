@@ -630,7 +630,10 @@ pub fn run_scenario(
             .and_then(|t| match Trace::from_jsonl(&t) {
                 Ok(trace) => Some(trace),
                 Err(e) => {
-                    log(&format!("the controller's trace {}: {e}", c.trace.display()));
+                    log(&format!(
+                        "the controller's trace {}: {e}",
+                        c.trace.display()
+                    ));
                     None
                 }
             })
