@@ -203,16 +203,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let mut failed = false;
             for path in scenarios {
                 // The checks `run` makes before it starts anything.
-                let checked = Scenario::load(&path).map_err(anyhow::Error::from).and_then(|s| {
-                    checked_controller_config(&s, FollowerKind::Optimal, None)
-                        .map(|_| s)
-                        .map_err(|e| {
-                            anyhow::anyhow!(
-                                "{}: the controller's configuration for it: {e}",
-                                path.display()
-                            )
-                        })
-                });
+                let checked = Scenario::load(&path)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|s| {
+                        checked_controller_config(&s, FollowerKind::Optimal, None)
+                            .map(|_| s)
+                            .map_err(|e| {
+                                anyhow::anyhow!(
+                                    "{}: the controller's configuration for it: {e}",
+                                    path.display()
+                                )
+                            })
+                    });
                 match checked {
                     Ok(s) => println!(
                         "{}: ok ({}, {} obstacles)",
