@@ -1,17 +1,19 @@
-//! Scenario files: `Scenario::from_toml`, what `ugv-sim check` and `ugv-sim run` load.
+//! Scenario files: what `ugv-sim check` does with each file (`Scenario::load`, that is
+//! `Scenario::from_toml`, then `mission::checked_controller_config`), the checks
+//! `ugv-sim run` makes before it starts anything.
 
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_sim::Scenario;
-use ugv_sim::mission::controller_config;
+use ugv_sim::mission::checked_controller_config;
 
-/// `scenario_toml`: the bytes as a scenario file (read as UTF-8 text, then
-/// `Scenario::from_toml`, which `Scenario::load` calls for `ugv-sim check` and `run`).
+/// `scenario_toml`: the bytes as a scenario file (read as UTF-8 text, then the checks
+/// of `ugv-sim check`).
 ///
-/// Invariants of a scenario that loads: the controller configuration the simulator
-/// derives from it (`mission::controller_config`) prints as the CONTROLLER.toml the
-/// HIL run writes (`toml::to_string_pretty`) and that text parses back as a
-/// configuration (TOML and types; whether its values pass the controller's checks is
-/// the controller's business) that prints the same.
+/// Invariants of a scenario that passes them: the controller configuration derived
+/// from it, printed as the CONTROLLER.toml a HIL run writes (`toml::to_string_pretty`),
+/// is accepted by the controller binary (`ControllerConfig::from_toml`, what
+/// `ugv-controller run --config` loads) and prints the same again; with either
+/// follower (ANFIS with a model path, as `--follower anfis --anfis-model` gives).
 pub fn scenario_toml(data: &[u8]) {
     let Some(text) = crate::text(data) else {
         return;
@@ -19,15 +21,22 @@ pub fn scenario_toml(data: &[u8]) {
     let Ok(scenario) = Scenario::from_toml(text, "fuzz.toml") else {
         return;
     };
-    for follower in [FollowerKind::Optimal, FollowerKind::Anfis] {
-        let cfg = controller_config(&scenario, follower);
+    for (follower, model) in [
+        (FollowerKind::Optimal, None),
+        (FollowerKind::Anfis, Some("anfis.json".into())),
+    ] {
+        let Ok(cfg) = checked_controller_config(&scenario, follower, model) else {
+            continue;
+        };
         let printed = match toml::to_string_pretty(&cfg) {
             Ok(t) => t,
-            Err(e) => panic!("CONTROLLER.toml of a valid scenario does not print: {e}"),
+            Err(e) => panic!("CONTROLLER.toml of a checked scenario does not print: {e}"),
         };
-        let again: ControllerConfig = match toml::from_str(&printed) {
+        let again = match ControllerConfig::from_toml(&printed, "CONTROLLER.toml") {
             Ok(c) => c,
-            Err(e) => panic!("CONTROLLER.toml of a valid scenario does not parse: {e}\n{printed}"),
+            Err(e) => panic!(
+                "the controller refuses the CONTROLLER.toml of a checked scenario: {e}\n{printed}"
+            ),
         };
         match toml::to_string_pretty(&again) {
             Ok(t) => assert_eq!(t, printed, "CONTROLLER.toml changes when reloaded"),
