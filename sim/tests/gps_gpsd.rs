@@ -125,17 +125,22 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
     let start = Instant::now();
     let mut client: Option<BufReader<TcpStream>> = None;
     let mut sent: BTreeMap<DateTime<Utc>, GpsEpoch> = BTreeMap::new();
-    let mut tpvs: Vec<(Value, GpsEpoch)> = Vec::new();
+    // gpsd reports a cycle's fix as it assembles it: a TPV after GGA (no speed or
+    // track yet), then another once RMC/VTG are in. The last TPV of an epoch is its
+    // report; an epoch is complete once a TPV of a later epoch has arrived.
+    let mut tpvs: BTreeMap<DateTime<Utc>, (Value, GpsEpoch)> = BTreeMap::new();
+    let completed =
+        |tpvs: &BTreeMap<DateTime<Utc>, (Value, GpsEpoch)>| tpvs.len().saturating_sub(1);
     let mut gst: Option<Value> = None;
     let mut att_heading: Option<f64> = None;
     let mut line = String::new();
     let mut untimed = 0;
-    while tpvs.len() < 10 || gst.is_none() || att_heading.is_none() {
+    while completed(&tpvs) < 10 || gst.is_none() || att_heading.is_none() {
         let elapsed = start.elapsed().as_secs_f64();
         if elapsed > 30.0 {
             bail!(
-                "after 30 s gpsd gave {} matching 3D TPVs (GST: {}, ATT: {}); its log:\n{}",
-                tpvs.len(),
+                "after 30 s gpsd gave {} complete matching 3D epochs (GST: {}, ATT: {}); its log:\n{}",
+                completed(&tpvs),
                 gst.is_some(),
                 att_heading.is_some(),
                 gpsd.log()
@@ -182,7 +187,7 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
                             .find(|(t, _)| (**t - time).num_milliseconds().abs() < 5)
                             .map(|(_, e)| e.clone())
                             .with_context(|| format!("TPV at {time} matches no epoch sent"))?;
-                        tpvs.push((v, epoch));
+                        tpvs.insert(time, (v, epoch));
                     }
                     Some("GST") => gst = Some(v),
                     _ => {}
@@ -194,12 +199,17 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
         }
     }
 
+    // The latest epoch may still be incomplete.
+    tpvs.pop_last();
     eprintln!(
-        "first matching TPV: {}",
-        tpvs.first().map(|t| t.0.to_string()).unwrap_or_default()
+        "first complete TPV: {}",
+        tpvs.first_key_value()
+            .map(|t| t.1.0.to_string())
+            .unwrap_or_default()
     );
     eprintln!("gpsd log tail:\n{}", gpsd.log());
-    for (v, e) in &tpvs {
+    ensure!(tpvs.len() >= 10, "{} complete epochs", tpvs.len());
+    for (v, e) in tpvs.values() {
         let what = format!("TPV {v}");
         let lat = v["lat"].as_f64().context("lat")?;
         let lon = v["lon"].as_f64().context("lon")?;
