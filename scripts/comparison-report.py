@@ -5,7 +5,7 @@
       writes OUT_DIR/<condition>/*.toml: the suite's scenarios with each disturbance
       written into the [steering], [throttle] or [gps.rtk] section.
   comparison-report.py report RESULTS_DIR FIGURE_DIR
-      prints docs/comparison.md from RESULTS_DIR/<condition>/<follower>/summary.json and
+      prints docs/comparison.md from the items of RESULTS_DIR/<condition>/<follower>/summary.json and
       draws FIGURE_DIR/metrics.png.
 """
 import json
@@ -174,7 +174,7 @@ def report(out, figures):
     for cond in CONDITIONS:
         for f in FOLLOWERS:
             p = out / cond / f / "summary.json"
-            runs[(cond, f)] = json.loads(p.read_text()) if p.exists() else []
+            runs[(cond, f)] = json.loads(p.read_text())["items"] if p.exists() else []
     training = json.loads((out / "anfis-training.json").read_text())
     names = [e["name"] for e in runs[("nominal", "optimal")]]
 

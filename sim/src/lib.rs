@@ -16,6 +16,7 @@ pub mod run;
 pub mod scenario;
 pub mod sil;
 pub mod suite;
+pub mod sweep;
 pub mod vehicle;
 pub mod verdict;
 pub mod world;

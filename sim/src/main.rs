@@ -49,9 +49,21 @@ enum Command {
     /// Run a scenario: in real time on the real wires (HIL; the default), or with the
     /// controller library in lockstep (--sil).
     Run(RunArgs),
-    /// Run every scenario of a folder in SIL, in parallel, and write summary.md,
-    /// summary.json and junit.xml. Exit code 0 when all pass, 1 otherwise.
+    /// Run every scenario of a folder in SIL, in parallel (with --seeds and --vary: a
+    /// sweep; with --shard: a part of it), and write summary.md, summary.json,
+    /// junit.xml and items.json. Exit code 0 when all pass, 1 otherwise.
     Suite(SuiteArgs),
+    /// Join the shards of one suite or sweep (each folder's items.json) into one
+    /// summary.md, summary.json and junit.xml; refuses missing or doubled items. Exit
+    /// code 0 when all passed, 1 otherwise.
+    Merge {
+        /// Shard result folders (or their items.json files).
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Where the merged summaries (and the merged items.json) go.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Run one simulated ECU alone on a CAN interface, in real time, as a stand-in for
     /// the hardware on a bench (for example on the physical side of ugv-bridge).
     Ecu {
@@ -105,6 +117,19 @@ struct SuiteArgs {
     /// then never share a bus, and --jobs N runs N at a time.
     #[arg(long)]
     isolate: bool,
+    /// Run every scenario (and grid point) with this many seeds, 1 to 100000: the
+    /// scenario's own, then seeds derived from it.
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
+    seeds: usize,
+    /// Sweep a scenario field: KEY=a,b,c or KEY=lo:hi:step (repeatable; the grid is
+    /// crossed with the seeds), e.g. steering.dead_time_s=0:0.3:0.05.
+    #[arg(long = "vary", value_name = "KEY=SPEC")]
+    vary: Vec<ugv_sim::sweep::Vary>,
+    /// Run shard I of N (I from 0) of the items, balanced by their time limits;
+    /// default: JOB_COMPLETION_INDEX of JOB_COMPLETIONS when set (a Kubernetes
+    /// Indexed Job), else all.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<ugv_sim::sweep::Shard>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -242,6 +267,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             status_every,
         } => run_ecu(kind, &can, scenario.as_ref(), status_every),
         Command::Suite(args) => run_suite(args),
+        Command::Merge { shards, out } => merge_shards(&shards, &out),
     }
 }
 
@@ -397,6 +423,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
 
 fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
     use ugv_sim::suite;
+    use ugv_sim::sweep::{Plan, Shard};
     let SuiteArgs {
         dir,
         results,
@@ -407,6 +434,9 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         controller,
         cans,
         isolate,
+        seeds,
+        vary,
+        shard,
     } = args;
     let files =
         suite::scenario_files(&dir).with_context(|| format!("reading {}", dir.display()))?;
@@ -423,7 +453,25 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         hil || !isolate,
         "--isolate is for --hil runs (SIL has no wires)"
     );
-    let total = files.len();
+    let shard = match shard {
+        Some(s) => s,
+        None => Shard::from_env(|k| std::env::var(k).ok())
+            .map_err(anyhow::Error::msg)?
+            .unwrap_or(Shard::ALL),
+    };
+    let plan = Plan::new(&files, seeds, &vary)?;
+    let info = plan.info(vec![
+        format!("mode={}", if hil { "hil" } else { "sil" }),
+        format!("follower={follower:?}"),
+        format!(
+            "anfis_model={}",
+            anfis_model
+                .as_ref()
+                .map_or_else(|| "-".to_owned(), |m| m.display().to_string())
+        ),
+    ]);
+    let mine = plan.shard_items(shard);
+    let total = mine.len();
     let tune = move |sc: &Scenario| {
         let mut cfg = controller_config(sc, follower);
         cfg.follower.anfis_model = anfis_model.clone();
@@ -435,15 +483,23 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         Some(c) => c,
         None => std::env::current_exe()?.with_file_name("ugv-controller"),
     };
-    let hil_runner = |file: &std::path::Path, sc: &Scenario, slot: usize| {
+    let hil_runner = |id: &str, sc: &Scenario, slot: usize| {
         let mut sc = sc.clone();
         if let Some(can) = cans.get(slot) {
             sc.can.interface = can.clone();
         }
-        let stem = file
-            .file_stem()
-            .map_or_else(|| sc.name.clone(), |s| s.to_string_lossy().into_owned());
-        let run_id = format!("suite-{stem}-{}", std::process::id());
+        // The item's id as a name for folders, services and namespaces.
+        let slug: String = id
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let run_id = format!("suite-{slug}-{}", std::process::id());
         let options = HilOptions {
             controller: Some(controller.clone()),
             controller_args: Vec::new(),
@@ -451,7 +507,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             gps_link: None,
             isolate: isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
             run_id,
-            results: results.join(&stem),
+            results: results.join(&slug),
             status_every: 1.0,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
@@ -478,38 +534,103 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         )
     };
-    let started = std::time::Instant::now();
-    let entries = suite::run_suite_with(&files, jobs, runner, &|done, e| {
-        let width = 30;
-        let filled = done * width / total;
+    if shard != Shard::ALL || plan.items.len() > files.len() {
         eprintln!(
-            "[{}{}] {done}/{total} {}: {}",
-            "#".repeat(filled),
-            ".".repeat(width - filled),
-            e.name,
-            if e.passed() { "passed" } else { "FAILED" }
+            "ugv-sim: {} items ({} scenarios x {} grid points x {seeds} seeds); shard {shard}: {total}",
+            plan.items.len(),
+            files.len(),
+            plan.groups.len() / files.len(),
         );
+    }
+    let started = std::time::Instant::now();
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(total as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} ETA {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let entries = suite::run_items(&plan, &mine, jobs, runner, &|done, e| {
+        let width = 30;
+        let filled = done * width / total.max(1);
+        // The line per item stays (CI logs); the bar, on a terminal only, gives the ETA.
+        bar.suspend(|| {
+            eprintln!(
+                "[{}{}] {done}/{total} {}: {}",
+                "#".repeat(filled),
+                ".".repeat(width - filled),
+                ugv_sim::suite::ItemRecord::of(e).label(),
+                if e.passed() { "passed" } else { "FAILED" }
+            );
+        });
+        bar.inc(1);
     });
+    bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
     let simulated: f64 = entries
         .iter()
         .filter_map(|e| e.verdict.as_ref().map(|v| v.time()))
         .sum();
-    std::fs::create_dir_all(&results).with_context(|| format!("creating {}", results.display()))?;
-    let md = suite::markdown(&entries);
-    std::fs::write(results.join("summary.md"), &md)?;
-    std::fs::write(
-        results.join("summary.json"),
-        serde_json::to_string_pretty(&entries)?,
-    )?;
-    std::fs::write(results.join("junit.xml"), suite::junit(&entries))?;
-    print!("{md}");
+    let shard_file = suite::ShardFile::of(info, shard, &entries);
+    let summary = suite::Summary::of(shard_file.items.iter().map(|i| i.record.clone()).collect());
+    write_summaries(&results, &summary, &shard_file)?;
     eprintln!(
-        "ugv-sim: {simulated:.1} s simulated in {wall:.2} s ({:.0}x real time); summaries in {}",
+        "ugv-sim: {simulated:.1} s simulated in {wall:.2} s ({:.0}x real time, {:.1} items/s); summaries in {}",
         simulated / wall.max(1e-9),
+        entries.len() as f64 / wall.max(1e-9),
         results.display()
     );
-    Ok(if entries.iter().all(|e| e.passed()) {
+    Ok(if summary.passed() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// summary.md (also printed), summary.json, junit.xml and items.json in `dir`.
+fn write_summaries(
+    dir: &std::path::Path,
+    summary: &ugv_sim::suite::Summary,
+    shard: &ugv_sim::suite::ShardFile,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+    };
+    let md = summary.markdown();
+    write("summary.md", &md)?;
+    write("summary.json", &summary.json())?;
+    write("junit.xml", &summary.junit())?;
+    write("items.json", &serde_json::to_string_pretty(shard)?)?;
+    print!("{md}");
+    Ok(())
+}
+
+fn merge_shards(shards: &[PathBuf], out: &std::path::Path) -> Result<ExitCode> {
+    let mut files = Vec::with_capacity(shards.len());
+    for s in shards {
+        let path = if s.is_dir() {
+            s.join("items.json")
+        } else {
+            s.clone()
+        };
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {} (a shard's items.json)", path.display()))?;
+        let file: ugv_sim::suite::ShardFile = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a shard's items.json", path.display()))?;
+        files.push((path.display().to_string(), file));
+    }
+    let (summary, merged) = ugv_sim::suite::merge(&files)?;
+    write_summaries(out, &summary, &merged)?;
+    eprintln!(
+        "ugv-sim: {} shards, {} items merged into {}",
+        files.len(),
+        merged.items.len(),
+        out.display()
+    );
+    Ok(if summary.passed() {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)

@@ -427,7 +427,7 @@ impl Scenario {
     /// [`ugv_fields::PLAUSIBLE_COORDINATE`], so the physics' `f32` never sees an
     /// infinity), the DBC's signal ranges where a value ends up on the bus, and the
     /// start and goal usable.
-    fn validate(&self) -> Result<(), FieldError> {
+    pub(crate) fn validate(&self) -> Result<(), FieldError> {
         let at = |keys: &[&'static str]| FieldPath::of(keys);
         let d = &self.datum;
         within(
