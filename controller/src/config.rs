@@ -25,20 +25,25 @@ pub enum ConfigError {
 
 pub use firmware_bridge::geodesy::Datum;
 
-/// Where to go: the straight line from `start` to `goal` is the reference the planner
-/// keeps close to (the paper's L).
+/// Where to go: the route from `start` through `waypoints` (in order) to `goal`; its
+/// legs are the reference the planner keeps close to (the paper's L: one leg, start
+/// to goal, without waypoints).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Mission {
     pub datum: Datum,
     pub start_x: f64,
     pub start_y: f64,
+    /// Points to pass in order before the goal (`[[mission.waypoints]]`).
+    pub waypoints: Vec<crate::route::Waypoint>,
     pub goal_x: f64,
     pub goal_y: f64,
     /// Heading at the goal, degrees CCW from East; default: along the line.
     pub goal_heading_deg: Option<f64>,
     /// Distance from the goal at which the mission is complete, metres.
     pub goal_tolerance: f64,
+    /// Speed limit on the last leg (into the goal), m/s.
+    pub goal_speed_limit: Option<f64>,
 }
 
 impl Default for Mission {
@@ -47,10 +52,12 @@ impl Default for Mission {
             datum: Datum::default(),
             start_x: 0.0,
             start_y: 0.0,
+            waypoints: Vec::new(),
             goal_x: 30.0,
             goal_y: 15.0,
             goal_heading_deg: None,
             goal_tolerance: 1.0,
+            goal_speed_limit: None,
         }
     }
 }
@@ -198,7 +205,12 @@ impl Default for FollowerConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SafetyConfig {
-    pub gps_timeout_s: f64,
+    /// The GPS receiver's configured epoch rate, 1-20 Hz: between fixes the pose is
+    /// dead-reckoned, and the GPS timeout follows from it unless set.
+    pub gps_rate_hz: f64,
+    /// No fix for this long is GPS loss, seconds; default [`SafetyConfig::gps_timeout`]
+    /// (2.5 epochs, at least 0.5 s).
+    pub gps_timeout_s: Option<f64>,
     pub laser_timeout_s: f64,
     pub report_timeout_s: f64,
     /// Accept RTK float (true) or only RTK fixed (false).
@@ -208,11 +220,27 @@ pub struct SafetyConfig {
 impl Default for SafetyConfig {
     fn default() -> Self {
         SafetyConfig {
-            gps_timeout_s: 0.5,
+            gps_rate_hz: 10.0,
+            gps_timeout_s: None,
             laser_timeout_s: 0.25,
             report_timeout_s: 0.25,
             accept_rtk_float: true,
         }
+    }
+}
+
+/// Epochs a GPS may miss before it counts as lost (with the derived timeout).
+const GPS_EPOCHS_MISSED: f64 = 2.5;
+/// The derived GPS timeout is never shorter than this (at high rates a few missed
+/// epochs are no loss), seconds.
+const GPS_TIMEOUT_MIN: f64 = 0.5;
+
+impl SafetyConfig {
+    /// How long without a fix is GPS loss: `gps_timeout_s` if set, else 2.5 epochs
+    /// at `gps_rate_hz` and at least 0.5 s (0.5 s at 2-20 Hz, 2.5 s at 1 Hz).
+    pub fn gps_timeout(&self) -> f64 {
+        self.gps_timeout_s
+            .unwrap_or((GPS_EPOCHS_MISSED / self.gps_rate_hz).max(GPS_TIMEOUT_MIN))
     }
 }
 
@@ -285,12 +313,22 @@ impl ControllerConfig {
             angle_deg(&at("goal_heading_deg"), h)?;
         }
         positive_up_to(&at("goal_tolerance"), m.goal_tolerance, 50.0, "m")?;
-        if (m.goal_x - m.start_x).hypot(m.goal_y - m.start_y) < 1.0 {
-            return Err(FieldError::new(
-                at("goal_x"),
-                "the goal must be at least 1 m from the start",
-            ));
+        if let Some(v) = m.goal_speed_limit {
+            positive_up_to(
+                &at("goal_speed_limit"),
+                v,
+                self.vehicle.max_speed,
+                "m/s (vehicle.max_speed)",
+            )?;
         }
+        crate::route::check_waypoints(
+            &at("waypoints"),
+            &m.waypoints,
+            (m.start_x, m.start_y),
+            (m.goal_x, m.goal_y),
+            &at("goal_x"),
+            self.vehicle.max_speed,
+        )?;
 
         let v = &self.vehicle;
         let at = |k: &'static str| FieldPath::of(&["vehicle", k]);
@@ -404,7 +442,19 @@ impl ControllerConfig {
 
         let s = &self.safety;
         let at = |k: &'static str| FieldPath::of(&["safety", k]);
-        positive_up_to(&at("gps_timeout_s"), s.gps_timeout_s, 10.0, "s")?;
+        within(&at("gps_rate_hz"), s.gps_rate_hz, 1.0, 20.0, "Hz")?;
+        if let Some(t) = s.gps_timeout_s {
+            positive_up_to(&at("gps_timeout_s"), t, 10.0, "s")?;
+            if t * s.gps_rate_hz < 1.0 {
+                return Err(FieldError::new(
+                    at("gps_timeout_s"),
+                    format!(
+                        "{t} s is shorter than one epoch at safety.gps_rate_hz = {} Hz",
+                        s.gps_rate_hz
+                    ),
+                ));
+            }
+        }
         positive_up_to(&at("laser_timeout_s"), s.laser_timeout_s, 10.0, "s")?;
         positive_up_to(&at("report_timeout_s"), s.report_timeout_s, 10.0, "s")?;
 

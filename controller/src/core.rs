@@ -278,7 +278,7 @@ impl Controller {
         }
         let speed = self.throttle.map_or(0.0, |(_, r)| r.wheel_speed);
         let phi = self.steering.map_or(0.0, |(_, r)| r.angle.to_radians());
-        self.loc.on_actuators(speed, phi);
+        self.loc.on_actuators(now, speed, phi);
     }
 
     fn driving(&self) -> bool {
@@ -338,7 +338,7 @@ impl Controller {
         let s = &self.cfg.safety;
         match self.loc.last_fix {
             None => Err((FaultReportCode::GpsLost, "no GPS fix".to_owned())),
-            Some((t, _)) if now - t > s.gps_timeout_s => Err((
+            Some((t, _)) if now - t > s.gps_timeout() => Err((
                 FaultReportCode::GpsLost,
                 format!("no GPS fix for {:.2} s", now - t),
             )),

@@ -11,5 +11,6 @@ pub mod intrusion;
 pub mod localisation;
 pub mod perception;
 pub mod planner;
+pub mod route;
 pub mod runtime;
 pub mod trace;

@@ -1,7 +1,8 @@
 //! Localisation: GPS fixes (latitude, longitude) into the local world frame around
 //! the datum, the antenna's offset removed to get the rear axle; heading from the
 //! dual-antenna heading, or from course over ground while moving; speed and steering
-//! angle from the actuators' reports; dead reckoning (the bicycle model) between fixes.
+//! angle from the actuators' reports; dead reckoning (the bicycle model, integrated
+//! report by report) between fixes, which at 1 Hz are a second and 2 m apart.
 
 use firmware_bridge::geodesy::{Enu, Geodetic, LocalFrame, course_deg_to_theta, normalize_rad_pi};
 use firmware_bridge::nmea::{FixQuality, GpsReading};
@@ -34,6 +35,11 @@ pub struct Localiser {
     heading_known: bool,
     /// Time of the pose estimate.
     at: f64,
+    /// Dead reckoning goes no further than this past the last fix (beyond it the GPS
+    /// counts as lost), seconds.
+    horizon: f64,
+    /// Time of the last fix with a position.
+    fixed_at: f64,
     /// Time and quality of the last fix with a position.
     pub last_fix: Option<(f64, FixQuality)>,
     speed: f64,
@@ -51,14 +57,21 @@ impl Localiser {
             pose: None,
             heading_known: false,
             at: 0.0,
+            horizon: cfg.safety.gps_timeout(),
+            fixed_at: 0.0,
             last_fix: None,
             speed: 0.0,
             phi: 0.0,
         })
     }
 
-    /// The actuators' measured speed and steering angle (from their reports).
-    pub fn on_actuators(&mut self, speed: f64, phi: f64) {
+    /// The actuators' measured speed and steering angle (from their reports) at `now`:
+    /// the pose is dead-reckoned up to now with the previous ones, then these hold.
+    pub fn on_actuators(&mut self, now: f64, speed: f64, phi: f64) {
+        if let Some(p) = self.predict(now) {
+            self.pose = Some(p);
+            self.at = self.at.max(now.min(self.fixed_at + self.horizon));
+        }
         self.speed = speed;
         self.phi = phi;
     }
@@ -119,13 +132,15 @@ impl Localiser {
             phi: self.phi,
         });
         self.at = now;
+        self.fixed_at = now;
     }
 
-    /// The pose at `now`, dead-reckoned from the last fix with the measured speed and
-    /// steering angle.
+    /// The pose at `now`, dead-reckoned from the last estimate with the measured speed
+    /// and steering angle, no further than the GPS timeout past the last fix.
     pub fn predict(&self, now: f64) -> Option<Pose> {
         let mut p = self.pose?;
-        let dt = (now - self.at).clamp(0.0, 1.0);
+        let until = now.min(self.fixed_at + self.horizon);
+        let dt = (until - self.at).max(0.0);
         let ds = self.speed * dt;
         let dtheta = ds * self.phi.tan() / self.wheelbase;
         let mid = p.theta + dtheta / 2.0;
@@ -196,7 +211,7 @@ mod tests {
         let cfg = ControllerConfig::default();
         let mut loc = Localiser::new(&cfg).expect("datum");
         let frame = loc.frame.clone();
-        loc.on_actuators(2.0, 0.0);
+        loc.on_actuators(0.0, 2.0, 0.0);
         loc.on_fix(
             0.0,
             &reading(&frame, cfg.vehicle.antenna_x, 0.0, Some(90.0)),
@@ -225,5 +240,29 @@ mod tests {
             loc.predict(0.2).expect("pose").theta.abs() < 1e-9,
             "course 90 = East = theta 0"
         );
+    }
+
+    #[test]
+    fn dead_reckoning_integrates_each_report_between_one_hertz_fixes() {
+        let mut cfg = ControllerConfig::default();
+        cfg.safety.gps_rate_hz = 1.0;
+        let mut loc = Localiser::new(&cfg).expect("datum");
+        let frame = loc.frame.clone();
+        loc.on_fix(
+            0.0,
+            &reading(&frame, cfg.vehicle.antenna_x, 0.0, Some(90.0)),
+        );
+        // Accelerating at 1 m/s^2, reported every 10 ms: 0.5 m after 1 s, not the
+        // 1 m the last speed alone would give.
+        for i in 1..=100 {
+            let t = f64::from(i) * 0.01;
+            loc.on_actuators(t, t, 0.0);
+        }
+        let p = loc.predict(1.0).expect("pose");
+        assert!((p.x - 0.5).abs() < 0.02, "{p:?}");
+        // Dead reckoning stops at the GPS timeout (2.5 s at 1 Hz) past the fix.
+        assert_eq!(cfg.safety.gps_timeout(), 2.5);
+        let far = loc.predict(10.0).expect("pose");
+        assert!((far.x - (0.5 + 1.5)).abs() < 0.02, "{far:?}");
     }
 }

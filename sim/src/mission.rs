@@ -28,6 +28,7 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.laser_x = scenario.laser.mount_x;
     v.laser_y = scenario.laser.mount_y;
     v.laser_yaw_deg = scenario.laser.mount_yaw_deg;
+    cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
     cfg.planner.cruise_speed = cfg.planner.cruise_speed.min(scenario.vehicle.max_speed);
     cfg.follower.kind = follower;
     cfg

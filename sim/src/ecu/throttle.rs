@@ -14,6 +14,30 @@ use crate::scenario::ThrottleConfig;
 /// Deceleration when coasting (rolling resistance), m/s^2.
 const COAST_DECEL: f64 = 0.3;
 
+/// The direction of travel: +1, -1, or 0 at rest (`f64::signum` is 1 at 0.0, which
+/// made a brake at standstill push the car backwards).
+fn direction(v: f64) -> f64 {
+    if v > 0.0 {
+        1.0
+    } else if v < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+/// The acceleration of a drive `drive` (m/s^2) against a brake (or rolling resistance)
+/// of `decel`: while moving the brake acts against the motion; at rest it holds the
+/// car against up to its own strength (static friction), so a brake alone never sets
+/// the car moving.
+fn braked(v: f64, drive: f64, decel: f64) -> f64 {
+    if v != 0.0 {
+        drive - decel * direction(v)
+    } else {
+        direction(drive) * (drive.abs() - decel).max(0.0)
+    }
+}
+
 /// A throttle command after its dead time.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Demand {
@@ -88,10 +112,10 @@ impl ThrottleEcu {
         let v = self.speed;
         let (accel, throttle, brake) = if !self.safety.enabled() {
             // Safe state: no drive, full brake.
-            (-self.cfg.brake_decel * v.signum(), 0.0, 100.0)
+            (braked(v, 0.0, self.cfg.brake_decel), 0.0, 100.0)
         } else if self.demand.gear == ThrottleCmdGear::Neutral {
             let b = self.demand.brake_pct / 100.0 * self.cfg.brake_decel;
-            (-(COAST_DECEL + b) * v.signum(), 0.0, self.demand.brake_pct)
+            (braked(v, 0.0, COAST_DECEL + b), 0.0, self.demand.brake_pct)
         } else {
             let max_accel = if self.demand.accel_limit > 0.0 {
                 self.demand.accel_limit.min(self.cfg.max_accel)
@@ -107,8 +131,8 @@ impl ThrottleEcu {
                 wanted.clamp(-self.cfg.max_decel, self.cfg.max_decel)
             };
             let brake_decel = self.demand.brake_pct / 100.0 * self.cfg.brake_decel;
-            let a = a - brake_decel * v.signum();
-            let decel_beyond_coast = (-a * v.signum() - COAST_DECEL).max(0.0);
+            let a = braked(v, a, brake_decel);
+            let decel_beyond_coast = (-a * direction(v) - COAST_DECEL).max(0.0);
             let brake =
                 (decel_beyond_coast / self.cfg.brake_decel * 100.0).max(self.demand.brake_pct);
             let throttle = if a * v.signum() >= 0.0 || v == 0.0 {
@@ -159,5 +183,137 @@ impl ThrottleEcu {
             throttle: self.throttle_pct,
             brake: self.brake_pct,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ecu::safety::SafetyTiming;
+    use golf_car_can::ControllerHeartbeatState;
+
+    fn ecu() -> ThrottleEcu {
+        ThrottleEcu::new(
+            ThrottleConfig::default(),
+            6.7,
+            Safety::new(SafetyTiming {
+                command_timeout: 0.1,
+                heartbeat_timeout: 0.1,
+                fault_clear: 0.25,
+            }),
+        )
+    }
+
+    /// Drive `ecu` for `seconds` from its clock `now` with `cmd` every 10 ms (1 ms
+    /// physics), the heartbeat in `state`; returns the distance driven (signed).
+    fn drive(
+        ecu: &mut ThrottleEcu,
+        now: &mut f64,
+        cmd: &ThrottleCmd,
+        state: ControllerHeartbeatState,
+        seconds: f64,
+    ) -> f64 {
+        let dt = 0.001;
+        let mut distance = 0.0;
+        for i in 1..=(seconds / dt).round() as u64 {
+            *now += dt;
+            if i % 10 == 0 {
+                ecu.safety.on_heartbeat(*now, state);
+                ecu.on_command(*now, cmd);
+            }
+            ecu.step(*now, dt);
+            distance += ecu.speed() * dt;
+        }
+        distance
+    }
+
+    fn braking(enable: bool, gear: ThrottleCmdGear) -> ThrottleCmd {
+        ThrottleCmd {
+            enable,
+            target_speed: 0.0,
+            accel_limit: 1.0,
+            brake: 40.0,
+            gear,
+        }
+    }
+
+    #[test]
+    fn a_car_braked_at_standstill_does_not_creep() {
+        for gear in [
+            ThrottleCmdGear::Forward,
+            ThrottleCmdGear::Reverse,
+            ThrottleCmdGear::Neutral,
+        ] {
+            let mut e = ecu();
+            let mut now = 0.0;
+            // The enable edge: low first, then high.
+            drive(
+                &mut e,
+                &mut now,
+                &braking(false, gear),
+                ControllerHeartbeatState::Auto,
+                0.05,
+            );
+            let moved = drive(
+                &mut e,
+                &mut now,
+                &braking(true, gear),
+                ControllerHeartbeatState::Auto,
+                60.0,
+            );
+            assert!(e.safety.enabled(), "{gear:?}: enabled");
+            assert!(moved.abs() < 1e-3, "{gear:?}: moved {moved} m in 60 s");
+        }
+        // In the safe state (estop) too.
+        let mut e = ecu();
+        let mut now = 0.0;
+        let moved = drive(
+            &mut e,
+            &mut now,
+            &braking(false, ThrottleCmdGear::Forward),
+            ControllerHeartbeatState::Estop,
+            60.0,
+        );
+        assert!(moved.abs() < 1e-3, "safe state: moved {moved} m");
+    }
+
+    #[test]
+    fn a_car_at_rest_drives_off_and_brakes_to_a_stop_without_reversing() {
+        let mut e = ecu();
+        let mut now = 0.0;
+        drive(
+            &mut e,
+            &mut now,
+            &braking(false, ThrottleCmdGear::Forward),
+            ControllerHeartbeatState::Auto,
+            0.05,
+        );
+        let go = ThrottleCmd {
+            target_speed: 2.0,
+            brake: 0.0,
+            ..braking(true, ThrottleCmdGear::Forward)
+        };
+        let ahead = drive(&mut e, &mut now, &go, ControllerHeartbeatState::Auto, 5.0);
+        assert!(
+            ahead > 3.0 && (e.speed() - 2.0).abs() < 0.1,
+            "{ahead} m, {} m/s",
+            e.speed()
+        );
+        drive(
+            &mut e,
+            &mut now,
+            &braking(true, ThrottleCmdGear::Forward),
+            ControllerHeartbeatState::Auto,
+            3.0,
+        );
+        assert_eq!(e.speed(), 0.0);
+        let after = drive(
+            &mut e,
+            &mut now,
+            &braking(true, ThrottleCmdGear::Forward),
+            ControllerHeartbeatState::Auto,
+            10.0,
+        );
+        assert!(after.abs() < 1e-3, "{after}");
     }
 }
