@@ -130,6 +130,9 @@ struct SuiteArgs {
     /// Indexed Job), else all.
     #[arg(long, value_name = "I/N")]
     shard: Option<ugv_sim::sweep::Shard>,
+    /// Print the ids of the items this shard would run, one per line, and run none.
+    #[arg(long)]
+    list: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -437,6 +440,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         seeds,
         vary,
         shard,
+        list,
     } = args;
     let files =
         suite::scenario_files(&dir).with_context(|| format!("reading {}", dir.display()))?;
@@ -471,6 +475,12 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         ),
     ]);
     let mine = plan.shard_items(shard);
+    if list {
+        for &i in &mine {
+            println!("{}", plan.items[i].id);
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let total = mine.len();
     let tune = move |sc: &Scenario| {
         let mut cfg = controller_config(sc, follower);
@@ -603,7 +613,10 @@ fn write_summaries(
     write("summary.md", &md)?;
     write("summary.json", &summary.json())?;
     write("junit.xml", &summary.junit())?;
-    write("items.json", &serde_json::to_string_pretty(shard)?)?;
+    // Last, and whole or not at all: a merge waiting for it never reads half a file.
+    write("items.json.partial", &serde_json::to_string_pretty(shard)?)?;
+    std::fs::rename(dir.join("items.json.partial"), dir.join("items.json"))
+        .with_context(|| format!("writing {}", dir.join("items.json").display()))?;
     print!("{md}");
     Ok(())
 }

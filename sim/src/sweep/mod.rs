@@ -34,11 +34,10 @@ pub enum SweepError {
     )]
     TooMany(u128),
     /// An override the scenario refuses (a wrong key, a value out of range).
-    #[error("--vary {setting}: {source}")]
+    #[error("--vary {setting}: {error}")]
     Override {
         setting: String,
-        #[source]
-        source: ScenarioError,
+        error: ScenarioError,
     },
 }
 
@@ -173,14 +172,14 @@ impl Plan {
                 .and_then(|t| Scenario::from_toml(t, &name).map_err(|e| e.to_string()));
             for point in &grid {
                 let scenario = match (&base, &text) {
-                    (Ok(_), Ok(t)) => Ok(scenario_with(t, &name, point).map_err(|source| {
+                    (Ok(_), Ok(t)) => Ok(scenario_with(t, &name, point).map_err(|error| {
                         SweepError::Override {
                             setting: point
                                 .iter()
                                 .map(Setting::to_string)
                                 .collect::<Vec<_>>()
                                 .join(" "),
-                            source,
+                            error,
                         }
                     })?),
                     (Err(e), _) => Err(e.clone()),

@@ -244,7 +244,9 @@ pub fn scenario_with(
         )
         .map_err(|m| parse(&label, format!("{}: {m}", s.key)))?;
     }
-    let scenario = Scenario::deserialize(doc).map_err(|e| parse(&label, e.to_string()))?;
+    // toml puts "in `section`" on a line of its own.
+    let scenario = Scenario::deserialize(doc)
+        .map_err(|e| parse(&label, e.to_string().trim_end().replace('\n', " ")))?;
     scenario.validate().map_err(|e| e.located(text, &label))?;
     Ok(scenario)
 }
