@@ -7,8 +7,11 @@
 # speed loop and white GPS noise. ANFIS is trained offline (hybrid learning, Jang 1993)
 # on nominal runs of the optimal follower, then both followers run every condition.
 # Writes results/comparison/ and the committed report docs/comparison.md with figures
-# in docs/comparison/ (matplotlib). Uses $CARGO_TARGET_DIR when set.
+# in docs/comparison/ (matplotlib). Uses $CARGO_TARGET_DIR when set. Every scenario runs
+# with $SEEDS seeds (default 20; `ugv-sim suite --seeds`), so success rates come with
+# their 95 % Wilson intervals.
 set -euo pipefail
+seeds=${SEEDS:-20}
 cd "$(dirname "$0")/.."
 # The report's figures need matplotlib (not needed by the tests, so installed here).
 python3 -c 'import matplotlib' 2>/dev/null || python3 -m pip install --quiet 'matplotlib==3.11.2'
@@ -34,8 +37,8 @@ python3 scripts/comparison-report.py conditions sim/scenarios/suite "$out/scenar
 # 4. Both followers across the suite in every condition (exit code 1 means a failed
 #    scenario: reported, not fatal).
 for cond in $(ls "$out/scenarios"); do
-    "$bin/ugv-sim" suite "$out/scenarios/$cond" --results "$out/$cond/optimal" >/dev/null 2>&1 || true
-    "$bin/ugv-sim" suite "$out/scenarios/$cond" --results "$out/$cond/anfis" \
+    "$bin/ugv-sim" suite "$out/scenarios/$cond" --seeds "$seeds" --results "$out/$cond/optimal" >/dev/null 2>&1 || true
+    "$bin/ugv-sim" suite "$out/scenarios/$cond" --seeds "$seeds" --results "$out/$cond/anfis" \
         --follower anfis --anfis-model "$out/anfis.json" >/dev/null 2>&1 || true
 done
 

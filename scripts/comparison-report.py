@@ -91,6 +91,23 @@ def metrics(entry):
     }
 
 
+def wilson95(k, n):
+    """The 95 % Wilson score interval of k successes in n (the formula of ugv-sim's
+    summaries, sim/src/sweep/stats.rs), pooled here over a condition's scenarios."""
+    if n == 0:
+        return (0.0, 1.0)
+    z = 1.959963984540054
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * (p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def rate(k, n):
+    lo, hi = wilson95(k, n)
+    return f"{k}/{n} ({100 * lo:.0f}-{100 * hi:.0f} %)"
+
+
 def mean(xs):
     xs = [x for x in xs if x is not None]
     return sum(xs) / len(xs) if xs else None
@@ -102,15 +119,9 @@ def fmt(x, nd=2):
 
 def discussion(summary, rows):
     """The reading of the results; every figure quoted is computed here."""
-    collisions = sum(
-        1 for ms in rows.values() for m in ms.values() if m and "collision" in m["failures"]
-    )
-    stops = sum(
-        1
-        for ms in rows.values()
-        for m in ms.values()
-        if m and not m["passed"] and "collision" not in m["failures"]
-    )
+    every = [m for ms in rows.values() for runs in ms.values() for m in runs]
+    collisions = sum(1 for m in every if m and "collision" in m["failures"])
+    stops = sum(1 for m in every if m and not m["passed"] and "collision" not in m["failures"])
     nom = {f: summary[("nominal", f)] for f in FOLLOWERS}
     calmer = [
         c
@@ -127,7 +138,7 @@ def discussion(summary, rows):
     per = []
     for c in CONDITIONS:
         o, a = summary[(c, "optimal")], summary[(c, "anfis")]
-        per.append(f"{c} {o['passed']}/{a['passed']}")
+        per.append(f"{c} {rate(o['passed'], o['total'])} / {rate(a['passed'], a['total'])}")
     L.append(
         "- Success, optimal law / ANFIS: " + ", ".join(per) + ". The steering dead time is "
         "by far the worst disturbance for both: the feedback gains are tuned for a 0.02 s "
@@ -152,18 +163,27 @@ def discussion(summary, rows):
         "noise straight to the steering (see the effort column) while ANFIS's bell "
         "memberships flatten it."
     )
+    apart = []
+    for c in CONDITIONS:
+        o, a = summary[(c, "optimal")], summary[(c, "anfis")]
+        (olo, ohi), (alo, ahi) = wilson95(o["passed"], o["total"]), wilson95(a["passed"], a["total"])
+        if ohi < alo or ahi < olo:
+            apart.append(f"{c} ({'ANFIS' if alo > ohi else 'the optimal law'} higher)")
     L.append(
-        "- Neither follower is clearly better: they pass about as many scenarios in each "
-        "condition and fail on different ones; with one seed per scenario, a one-or-two "
-        "scenario difference is within the run-to-run spread of a marginal case. ANFIS "
-        "never saw a disturbance in training; it generalises because it is close to a "
-        "linear law in its inputs."
+        "- Whether one follower is better: their 95 % intervals of the success rate "
+        + (
+            f"are apart in {', '.join(apart)}, and overlap in the other conditions."
+            if apart
+            else "overlap in every condition: no difference is shown at this many runs."
+        )
+        + " ANFIS never saw a disturbance in training; it generalises because it is close "
+        "to a linear law in its inputs."
     )
     L.append(
-        "- Not covered: several seeds per scenario (Monte Carlo), a replan-on-new-"
-        "information configuration (needs controller options in `ugv-sim suite`), and "
-        "integral action against the steering bias (neither follower has it; replanning "
-        "hides most of the bias's lateral error, at the cost of steering effort)."
+        "- Not covered: a replan-on-new-information configuration (needs controller "
+        "options in `ugv-sim suite`), and integral action against the steering bias "
+        "(neither follower has it; replanning hides most of the bias's lateral error, at "
+        "the cost of steering effort)."
     )
     L.append("")
     return L
@@ -176,47 +196,59 @@ def report(out, figures):
             p = out / cond / f / "summary.json"
             runs[(cond, f)] = json.loads(p.read_text())["items"] if p.exists() else []
     training = json.loads((out / "anfis-training.json").read_text())
-    names = [e["name"] for e in runs[("nominal", "optimal")]]
+    names = list(dict.fromkeys(e["name"] for e in runs[("nominal", "optimal")]))
+    seeds = max((e.get("seed_index", 0) + 1 for e in runs[("nominal", "optimal")]), default=1)
 
+    # Per condition and follower: scenario name -> the metrics of its runs, seed by seed.
     rows = {}
     for (cond, f), entries in runs.items():
-        ms = {e["name"]: metrics(e) for e in entries}
+        ms = {}
+        for e in entries:
+            ms.setdefault(e["name"], []).append(metrics(e))
         rows[(cond, f)] = ms
     summary = {}
     for cond in CONDITIONS:
-        # Paired: time and path over the scenarios both followers brought to the goal.
+        # Paired: time and path over the runs (scenario, seed) both followers brought
+        # to the goal.
         both = [
-            n
+            (n, k)
             for n in names
+            for k in range(seeds)
             if all(
-                (rows[(cond, f)].get(n) or {}).get("goal") for f in FOLLOWERS
+                k < len(rows[(cond, f)].get(n, []))
+                and (rows[(cond, f)][n][k] or {}).get("goal")
+                for f in FOLLOWERS
             )
         ]
         for f in FOLLOWERS:
             ms = rows[(cond, f)]
-            ok = [m for m in ms.values() if m and m["passed"]]
+            every = [m for runs in ms.values() for m in runs]
             summary[(cond, f)] = {
-                "passed": len(ok),
-                "total": len(ms),
+                "passed": sum(1 for m in every if m and m["passed"]),
+                "total": len(every),
                 "clearance": min(
-                    (m["clearance"] for m in ms.values() if m and m["clearance"] is not None),
+                    (m["clearance"] for m in every if m and m["clearance"] is not None),
                     default=None,
                 ),
-                "clearance_mean": mean(m["clearance"] for m in ms.values() if m),
-                "path": mean(ms[n]["path"] for n in both),
-                "time": mean(ms[n]["time"] for n in both),
-                "rms": mean(m["rms"] for m in ms.values() if m),
-                "effort": mean(m["effort"] for m in ms.values() if m),
+                "clearance_mean": mean(m["clearance"] for m in every if m),
+                "path": mean(ms[n][k]["path"] for n, k in both),
+                "time": mean(ms[n][k]["time"] for n, k in both),
+                "rms": mean(m["rms"] for m in every if m),
+                "effort": mean(m["effort"] for m in every if m),
                 "paired": len(both),
-                "failed": sorted(n for n, m in ms.items() if not (m and m["passed"])),
+                "failed": [
+                    n + (f" ({sum(1 for m in runs if not (m and m['passed']))}/{len(runs)})" if seeds > 1 else "")
+                    for n, runs in sorted(ms.items())
+                    if any(not (m and m["passed"]) for m in runs)
+                ],
             }
 
     L = ["# Optimal control law against ANFIS, nominal and under disturbances", ""]
     L.append(
         "Made with `bash scripts/compare-followers.sh` (SIL, every scenario of "
-        f"`sim/scenarios/suite`, {len(names)} of them, in {len(CONDITIONS)} conditions, "
-        "with each follower: "
-        f"{len(names) * len(CONDITIONS) * len(FOLLOWERS)} runs). ANFIS (first-order Sugeno, "
+        f"`sim/scenarios/suite`, {len(names)} of them, {seeds} seeds each (`ugv-sim suite "
+        f"--seeds {seeds}`), in {len(CONDITIONS)} conditions, with each follower: "
+        f"{len(names) * seeds * len(CONDITIONS) * len(FOLLOWERS)} runs). ANFIS (first-order Sugeno, "
         "generalized bell MFs, 2 per input, 8 rules, hybrid learning) maps the lateral "
         "error, the heading error and the path's steering angle to the steering command; "
         "it was trained offline on the optimal follower's nominal runs of three scenarios "
@@ -251,11 +283,13 @@ def report(out, figures):
         "## Results per condition",
         "",
         "Success: the scenario's own criteria (goal reached without collision, or a safe "
-        "stop where that is the expectation). Min clearance: the smallest footprint "
-        "clearance over all scenarios (and the mean of each scenario's minimum). Path and "
-        "time to goal: means over the scenarios both followers brought to the goal in that "
-        "condition (n). Tracking RMS: the lateral error against the planned path; steering "
-        "effort: RMS of the commanded road-wheel angle rate; both averaged over scenarios.",
+        "stop where that is the expectation), over all runs of the condition, with its "
+        "95 % Wilson score interval. Min clearance: the smallest footprint "
+        "clearance over all runs (and the mean of each run's minimum). Path and "
+        "time to goal: means over the runs (scenario and seed) both followers brought to "
+        "the goal in that condition (n). Tracking RMS: the lateral error against the planned path; steering "
+        "effort: RMS of the commanded road-wheel angle rate; both averaged over runs. "
+        "Failed: the scenarios with failed runs (how many of their runs).",
         "",
         "| condition | follower | success | min clearance m (mean) | path m | time to goal s | n | tracking RMS m | steering effort deg/s | failed |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -264,7 +298,7 @@ def report(out, figures):
         for f, fname in FOLLOWERS.items():
             s = summary[(cond, f)]
             L.append(
-                f"| {cond} | {fname} | {s['passed']}/{s['total']} | {fmt(s['clearance'])} "
+                f"| {cond} | {fname} | {rate(s['passed'], s['total'])} | {fmt(s['clearance'])} "
                 f"({fmt(s['clearance_mean'])}) | {fmt(s['path'], 1)} | {fmt(s['time'], 1)} | "
                 f"{s['paired']} | {fmt(s['rms'], 3)} | {fmt(s['effort'], 1)} | "
                 f"{', '.join(s['failed']) or '-'} |"
@@ -304,7 +338,12 @@ def report(out, figures):
         for j, (f, fname) in enumerate(FOLLOWERS.items()):
             ms = rows[("steer-bias", f)]
             xs = [i + (j - 0.5) * width for i in range(len(names))]
-            ax.bar(xs, [(ms.get(n) or {}).get("rms") or 0.0 for n in names], width, label=fname)
+            ax.bar(
+                xs,
+                [mean((m or {}).get("rms") for m in ms.get(n, [])) or 0.0 for n in names],
+                width,
+                label=fname,
+            )
         ax.set_xticks(range(len(names)))
         ax.set_xticklabels(names, rotation=60, ha="right", fontsize=8)
         ax.set_ylabel("tracking error RMS, m")
@@ -323,7 +362,10 @@ def report(out, figures):
         L += ["(matplotlib is not installed: no figures this time)", ""]
 
     L += ["## Per scenario", ""]
-    L.append("Verdict and tracking RMS (m) per scenario, follower and condition (o = optimal, a = ANFIS; x = failed).")
+    L.append(
+        "Runs passed and mean tracking RMS (m) per scenario, follower and condition "
+        "(o = optimal, a = ANFIS)."
+    )
     L.append("")
     L.append("| scenario | " + " | ".join(f"{c} o | {c} a" for c in CONDITIONS) + " |")
     L.append("|---|" + "---|" * (2 * len(CONDITIONS)))
@@ -331,19 +373,24 @@ def report(out, figures):
         cells = []
         for c in CONDITIONS:
             for f in FOLLOWERS:
-                m = rows[(c, f)].get(n)
-                if m is None:
+                ms = [m for m in rows[(c, f)].get(n, []) if m]
+                if not ms:
                     cells.append("error")
                 else:
-                    cells.append(("" if m["passed"] else "x ") + fmt(m["rms"], 3))
+                    ok = sum(1 for m in ms if m["passed"])
+                    cells.append(f"{ok}/{len(ms)} {fmt(mean(m['rms'] for m in ms), 3)}")
         L.append(f"| {n} | " + " | ".join(cells) + " |")
-    L += ["", "Failures:", ""]
+    L += ["", "Failures (each scenario's failed runs, and the first one's reasons):", ""]
     any_fail = False
     for (c, f), ms in rows.items():
-        for n, m in ms.items():
-            if m and not m["passed"]:
+        for n, runs in ms.items():
+            failed = [m for m in runs if m and not m["passed"]]
+            if failed:
                 any_fail = True
-                L.append(f"- {c}, {FOLLOWERS[f]}, {n}: {'; '.join(m['failures'])}")
+                L.append(
+                    f"- {c}, {FOLLOWERS[f]}, {n}: {len(failed)}/{len(runs)}: "
+                    f"{'; '.join(failed[0]['failures'])}"
+                )
     if not any_fail:
         L.append("- none")
     L.append("")
