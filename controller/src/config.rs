@@ -106,6 +106,12 @@ impl Default for Vehicle {
 pub struct PlannerConfig {
     /// Replanning period T_s, seconds.
     pub replan_period_s: f64,
+    /// The local goal lies this far along the route ahead of the car's place on it
+    /// (the receding horizon; within the laser's range), metres.
+    pub horizon_m: f64,
+    /// A local goal inside an obstacle is moved on along the route, or else back
+    /// towards the car down to this distance, metres.
+    pub horizon_min_m: f64,
     /// Added to the vehicle radius for every obstacle, metres.
     pub safety_margin: f64,
     /// Cruise speed; t_f - t_k = (x_f - x_k) / cruise_speed, m/s.
@@ -142,6 +148,8 @@ impl Default for PlannerConfig {
     fn default() -> Self {
         PlannerConfig {
             replan_period_s: 0.5,
+            horizon_m: 20.0,
+            horizon_min_m: 8.0,
             safety_margin: 0.3,
             cruise_speed: 2.0,
             steer_usage: 0.85,
@@ -363,6 +371,14 @@ impl ControllerConfig {
         let pc = &self.planner;
         let at = |k: &'static str| FieldPath::of(&["planner", k]);
         positive_up_to(&at("replan_period_s"), pc.replan_period_s, 10.0, "s")?;
+        within(&at("horizon_m"), pc.horizon_m, 5.0, 200.0, "m")?;
+        within(
+            &at("horizon_min_m"),
+            pc.horizon_min_m,
+            2.0,
+            pc.horizon_m,
+            "m (up to horizon_m)",
+        )?;
         within(&at("safety_margin"), pc.safety_margin, 0.0, 5.0, "m")?;
         positive(&at("cruise_speed"), pc.cruise_speed)?;
         if pc.cruise_speed > v.max_speed {

@@ -1,9 +1,21 @@
-//! Guidance: replanning every T_s with the Qu et al. planner in a frame whose x axis
-//! points from the mission's start to its goal, within the steering limit, and
-//! following the planned path with the paper's optimal law (feed-forward steering of
-//! the path plus feedback on the lateral and heading errors) or an ANFIS model.
+//! Guidance: replanning every T_s with the Qu et al. planner towards a local goal on
+//! the mission's route, in a frame whose x axis points from the car's place on the
+//! route to that goal, within the steering limit, and following the planned path with
+//! the paper's optimal law (feed-forward steering of the path plus feedback on the
+//! lateral and heading errors) or an ANFIS model.
 //!
 //! # Beyond the paper
+//!
+//! - Routes and a receding horizon: the mission is a route (start, waypoints, goal,
+//!   [`crate::route::Route`]). Each replanning plans one Qu et al. polynomial from the
+//!   car to a local goal `horizon_m` further along the route (the goal itself once it
+//!   is that near), arriving with the route's heading there; the frame's x axis runs
+//!   from the car's place on the route (its progress) to the local goal, and the
+//!   paper's L is that chord. A local goal with an inflated obstacle on it or on the
+//!   5 m of route before it is moved on
+//!   along the route (1 m at a time, up to the goal) or, failing that, back towards
+//!   the car (down to `horizon_min_m`). A start-goal mission no longer than the
+//!   horizon is planned exactly as before: one leg, the goal as the local goal.
 //!
 //! - Steering limit: among the feasible a6 the cheapest path within 85 % of the
 //!   actuator's limit is taken (the method has no steering constraint).
@@ -34,6 +46,7 @@ use crate::anfis::AnfisModel;
 use crate::config::{ControllerConfig, FollowerKind};
 use crate::localisation::Pose;
 use crate::planner::{self, Interval, PlanOptions, PlanProblem, Trajectory};
+use crate::route::{Route, RoutePoint};
 
 /// An obstacle for the planner, in the world frame.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -45,7 +58,7 @@ pub struct Circle {
     pub vy: f64,
 }
 
-/// The planning frame: origin at the mission's start, x towards the goal.
+/// A planning frame: origin on the route, x towards the local goal.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathFrame {
     pub ox: f64,
@@ -182,11 +195,42 @@ pub enum Guidance {
     Arrived,
 }
 
+/// How far back and ahead of its last progress the car's place on the route is looked
+/// for (per call: progress is updated every control tick), metres.
+const PROGRESS_BACK: f64 = 2.0;
+const PROGRESS_AHEAD: f64 = 5.0;
+/// Step of the search for a clear local goal along the route, metres.
+const LOCAL_GOAL_STEP: f64 = 1.0;
+/// Sideways shifts of a detour's local goal, metres (negative: right).
+const DETOUR_SHIFTS: [f64; 6] = [-1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
+/// Most detours tried per replanning.
+const MAX_DETOURS: usize = 6;
+
+/// Whether `p` lies outside every static obstacle grown by `r0`.
+fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
+    obstacles
+        .iter()
+        .filter(|o| o.vx == 0.0 && o.vy == 0.0)
+        .all(|o| (o.x - p.x).hypot(o.y - p.y) > o.radius + r0)
+}
+
+/// The stretch of route before a local goal that must be clear of obstacles, metres.
+const LOCAL_GOAL_APPROACH: f64 = 5.0;
+/// A local goal's heading in its frame is kept within this (y(x) cannot arrive
+/// steeper), radians.
+const MAX_GOAL_HEADING: f64 = 1.2;
+
 /// Replanning and following.
 #[derive(Debug)]
 pub struct Navigator {
     cfg: ControllerConfig,
-    pub frame: PathFrame,
+    route: Route,
+    /// The car's progress along the route (arc length), metres.
+    progress: f64,
+    /// The frame of the active plan (or of the alignment turn).
+    frame: PathFrame,
+    /// The last leg, for "passed the goal".
+    last_leg: PathFrame,
     law: SteeringLaw,
     active: Option<Trajectory>,
     /// The active path was planned around moving obstacles: drive its pace.
@@ -237,10 +281,15 @@ impl Navigator {
                 wheelbase: cfg.vehicle.wheelbase,
             },
         };
-        let m = &cfg.mission;
+        let route = Route::new(&cfg.mission);
+        let points = route.points();
+        let last_leg = PathFrame::new(points[points.len() - 2], points[points.len() - 1]);
         Ok(Navigator {
             cfg: cfg.clone(),
-            frame: PathFrame::new((m.start_x, m.start_y), (m.goal_x, m.goal_y)),
+            frame: PathFrame::new(points[0], points[1]),
+            last_leg,
+            route,
+            progress: 0.0,
             law,
             active: None,
             paced: false,
@@ -252,20 +301,83 @@ impl Navigator {
         })
     }
 
-    fn goal_heading_in_frame(&self) -> f64 {
-        self.cfg
-            .mission
-            .goal_heading_deg
-            .map_or(0.0, |h| wrap(h.to_radians() - self.frame.angle))
+    /// The car's progress along the route from `pose`.
+    fn progress_at(&self, pose: &Pose) -> f64 {
+        self.route
+            .project(pose.x, pose.y, self.progress, PROGRESS_BACK, PROGRESS_AHEAD)
     }
 
-    /// The planning problem for a replanning from `pose` at `now`.
-    pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
-        let (px, py) = self.frame.to_path(pose.x, pose.y);
-        let theta = wrap(pose.theta - self.frame.angle);
+    /// The local goal from progress `s`: `horizon_m` further along the route (the goal
+    /// once that near), moved on along the route, or else back towards the car, until
+    /// it lies outside every inflated static obstacle; the nominal one when none does
+    /// (the planner then finds no path, and the car stops).
+    pub fn local_goal(&self, s: f64, obstacles: &[Circle]) -> RoutePoint {
+        let pc = &self.cfg.planner;
+        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
+        let end = self.route.length();
+        let nominal = (s + pc.horizon_m).min(end);
+        // The route's last LOCAL_GOAL_APPROACH before the goal is clear too, so a plan
+        // can arrive on it with its heading.
+        let clear = |g: &RoutePoint| {
+            let n = (LOCAL_GOAL_APPROACH / LOCAL_GOAL_STEP) as usize;
+            (0..=n)
+                .map(|k| self.route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
+                .all(|p| clear_of(&p, obstacles, r0))
+        };
+        let steps = ((end - nominal) / LOCAL_GOAL_STEP).ceil() as usize;
+        let back = ((pc.horizon_m - pc.horizon_min_m).max(0.0) / LOCAL_GOAL_STEP) as usize;
+        let on = (0..=steps).map(|i| (nominal + i as f64 * LOCAL_GOAL_STEP).min(end));
+        let nearer = (1..=back).map(|i| nominal - i as f64 * LOCAL_GOAL_STEP);
+        on.chain(nearer.filter(|&g| g > s))
+            .map(|g| self.route.local_goal(g))
+            .find(clear)
+            .unwrap_or_else(|| self.route.local_goal(nominal))
+    }
+
+    /// Local goals to try when the first has no feasible path (detours): the first
+    /// local goal shifted sideways by 1.5, 3 and 4.5 m (right first, then left), then
+    /// the same at half the distance along the route; each clear of every inflated
+    /// static obstacle; at most `MAX_DETOURS`. The order is the stated cost: the least
+    /// lateral shift, then the farther goal, wins among those with a feasible path.
+    pub fn detours(&self, s: f64, first: &RoutePoint, obstacles: &[Circle]) -> Vec<RoutePoint> {
+        let r0 = self.cfg.vehicle.radius + self.cfg.planner.safety_margin;
+        let half = self.route.at(s + (first.s - s) / 2.0);
+        let mut out = Vec::new();
+        for base in [*first, half] {
+            if base.s - s < self.cfg.planner.horizon_min_m / 2.0 {
+                continue;
+            }
+            for shift in DETOUR_SHIFTS {
+                let (nx, ny) = (-base.heading.sin(), base.heading.cos());
+                let g = RoutePoint {
+                    x: base.x + shift * nx,
+                    y: base.y + shift * ny,
+                    ..base
+                };
+                if clear_of(&g, obstacles, r0) && out.len() < MAX_DETOURS {
+                    out.push(g);
+                }
+            }
+        }
+        out
+    }
+
+    /// The planning problem towards `goal` from `pose` at `now`, in the frame from the
+    /// car's place on the route (`here`) to the goal; and whether an obstacle moves.
+    fn problem(
+        &self,
+        now: f64,
+        pose: &Pose,
+        obstacles: &[Circle],
+        here: &RoutePoint,
+        goal: &RoutePoint,
+    ) -> (PlanProblem, PathFrame, bool) {
+        let frame = PathFrame::new((here.x, here.y), (goal.x, goal.y));
+        let (px, py) = frame.to_path(pose.x, pose.y);
+        let theta = wrap(pose.theta - frame.angle);
         let pc = &self.cfg.planner;
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
-        let span = self.frame.length - px;
+        let span = frame.length - px;
         let r0 = self.cfg.vehicle.radius + pc.safety_margin;
         let mut any_moving = false;
         let problem = PlanProblem {
@@ -276,9 +388,9 @@ impl Navigator {
                 phi: pose.phi.clamp(-limit, limit),
             },
             goal: planner::VehicleState {
-                x: self.frame.length,
+                x: frame.length,
                 y: 0.0,
-                theta: self.goal_heading_in_frame(),
+                theta: wrap(goal.heading - frame.angle).clamp(-MAX_GOAL_HEADING, MAX_GOAL_HEADING),
                 phi: 0.0,
             },
             line_start: planner::LineStart { x0: 0.0, y0: 0.0 },
@@ -290,8 +402,8 @@ impl Navigator {
             obstacles: obstacles
                 .iter()
                 .map(|o| {
-                    let (x, y) = self.frame.to_path(o.x, o.y);
-                    let (vx, vy) = self.frame.rotate_to_path(o.vx, o.vy);
+                    let (x, y) = frame.to_path(o.x, o.y);
+                    let (vx, vy) = frame.rotate_to_path(o.vx, o.vy);
                     if vx != 0.0 || vy != 0.0 {
                         // Moving: swept and clipped per pace in `solve`.
                         any_moving = true;
@@ -318,6 +430,27 @@ impl Navigator {
                 })
                 .collect(),
         };
+        (problem, frame, any_moving)
+    }
+
+    /// The planning problem for a replanning from `pose` at `now`: towards the local
+    /// goal, with the detours to try if it has no feasible path.
+    pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
+        let s = self.progress_at(pose);
+        let here = self.route.at(s);
+        let goal = self.local_goal(s, obstacles);
+        let (problem, frame, any_moving) = self.problem(now, pose, obstacles, &here, &goal);
+        let detours = self
+            .detours(s, &goal, obstacles)
+            .iter()
+            .map(|g| {
+                let (p, f, _) = self.problem(now, pose, obstacles, &here, g);
+                (p, f)
+            })
+            .collect();
+        let theta = wrap(pose.theta - frame.angle);
+        let pc = &self.cfg.planner;
+        let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let pacing = any_moving.then(|| Pacing {
             speeds: pc
                 .pace_fractions
@@ -348,7 +481,8 @@ impl Navigator {
             time: now,
             problem,
             steer_limit: limit,
-            frame: self.frame,
+            frame,
+            detours,
             pacing,
             align,
         }
@@ -356,8 +490,8 @@ impl Navigator {
 
     /// Whether a replanning is due at `now` from `pose`.
     pub fn replan_due(&self, now: f64, pose: &Pose) -> bool {
-        let (px, _) = self.frame.to_path(pose.x, pose.y);
-        now >= self.next_replan && self.frame.length - px > self.cfg.planner.final_approach
+        now >= self.next_replan
+            && self.route.length() - self.progress_at(pose) > self.cfg.planner.final_approach
     }
 
     /// A replanning was issued at `now`: the next is due one T_s later.
@@ -367,6 +501,7 @@ impl Navigator {
 
     /// Take a finished replanning: its path is followed from now on.
     pub fn accept(&mut self, outcome: PlanOutcome) {
+        self.frame = outcome.frame;
         match outcome.result {
             Ok((trajectory, record)) => {
                 if trajectory.is_some() {
@@ -395,8 +530,9 @@ impl Navigator {
         if to_goal <= self.cfg.mission.goal_tolerance {
             return Guidance::Arrived;
         }
+        self.progress = self.progress_at(pose);
         let (px, py) = self.frame.to_path(pose.x, pose.y);
-        if self.frame.length - px <= 0.0 {
+        if self.last_leg.length - self.last_leg.to_path(pose.x, pose.y).0 <= 0.0 {
             // Past the goal's x without reaching it: the polynomial cannot go back.
             return Guidance::Stop {
                 reason: format!("passed the goal {to_goal:.2} m beside it"),
@@ -447,6 +583,11 @@ impl Navigator {
             self.cfg.planner.cruise_speed
         };
         let speed = pace
+            .min(
+                self.route
+                    .speed_limit(self.progress)
+                    .unwrap_or(f64::INFINITY),
+            )
             .min((f.max_lateral_accel / curvature).sqrt())
             .min((2.0 * f.decel * to_goal).sqrt())
             .min(self.cfg.vehicle.max_speed);
@@ -466,6 +607,9 @@ pub struct PlanRequest {
     /// Road-wheel angle a planned path may use, radians.
     pub steer_limit: f64,
     frame: PathFrame,
+    /// Problems towards other local goals (with their frames), tried in order when
+    /// `problem` has no feasible path.
+    pub detours: Vec<(PlanProblem, PathFrame)>,
     /// Set when moving obstacles are in view: the paces to try.
     pub pacing: Option<Pacing>,
     /// Set when the car heads too far from the line: turn towards the goal first.
@@ -599,6 +743,8 @@ pub fn sweep(
 #[derive(Clone, Debug)]
 pub struct PlanOutcome {
     pub time: f64,
+    /// The frame it was planned in.
+    pub frame: PathFrame,
     pub result: Result<(Option<Trajectory>, PlanRecord), String>,
 }
 
@@ -613,54 +759,82 @@ pub struct PlanOutcome {
 /// space-time one: the obstacle's predicted position at the instant the car is at each
 /// x. With no pace feasible the car stops (it yields).
 pub fn solve(req: &PlanRequest) -> PlanOutcome {
-    let run = || -> Result<(Option<Trajectory>, PlanRecord), String> {
-        if let Some(align) = &req.align {
-            let (_, mut record) = record(req, None, false);
-            record.align = align.steer(req.problem.vehicle_radius, req.steer_limit);
-            record.feasible = record.align.is_some();
-            return Ok((None, record));
-        }
-        let Some(pacing) = &req.pacing else {
-            let chosen = solve_one(&req.problem, req.steer_limit)?;
-            return Ok(record(req, chosen, false));
+    if let Some(align) = &req.align {
+        let (_, mut record) = record(req.time, &req.frame, None, false);
+        record.align = align.steer(req.problem.vehicle_radius, req.steer_limit);
+        record.feasible = record.align.is_some();
+        return PlanOutcome {
+            time: req.time,
+            frame: req.frame,
+            result: Ok((None, record)),
         };
-        let p = &req.problem;
-        let span = p.goal.x - p.state.x;
-        let line = p.reference_line().map_err(|e| e.to_string())?;
-        let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
-        let mut best: Option<(f64, Chosen)> = None;
-        for &pace in &pacing.speeds {
-            let margin = pacing.time_margin + pacing.schedule_slip(pace);
-            let mut problem = p.clone();
-            problem.t_f = p.t_k + span / pace;
-            problem.obstacles = p
-                .obstacles
-                .iter()
-                .flat_map(|o| {
-                    if o.vx == 0.0 && o.vy == 0.0 {
-                        vec![*o]
-                    } else {
-                        sweep(o, margin, p.state.x, p.state.y, p.vehicle_radius)
-                    }
-                })
-                .collect();
-            if let Some(c) = solve_one(&problem, req.steer_limit)? {
-                let score = pacing.score(
-                    c.trajectory.path().reference_cost(&line) / span.abs(),
-                    pace,
-                    fastest,
-                );
-                if best.as_ref().is_none_or(|b| score < b.0) {
-                    best = Some((score, c));
+    }
+    // The local goal, then the detours in order: the first with a feasible path.
+    let mut nominal = None;
+    let tries =
+        std::iter::once((&req.problem, req.frame)).chain(req.detours.iter().map(|(p, f)| (p, *f)));
+    for (problem, frame) in tries {
+        let result = solve_towards(req, problem, &frame);
+        let outcome = PlanOutcome {
+            time: req.time,
+            frame,
+            result,
+        };
+        match &outcome.result {
+            Ok((None, _)) => {
+                nominal.get_or_insert(outcome);
+            }
+            _ => return outcome,
+        }
+    }
+    nominal.unwrap_or(PlanOutcome {
+        time: req.time,
+        frame: req.frame,
+        result: Err("no planning problem".to_owned()),
+    })
+}
+
+/// One local goal's planning problem solved (see [`solve`]).
+fn solve_towards(
+    req: &PlanRequest,
+    p: &PlanProblem,
+    frame: &PathFrame,
+) -> Result<(Option<Trajectory>, PlanRecord), String> {
+    let Some(pacing) = &req.pacing else {
+        let chosen = solve_one(p, req.steer_limit)?;
+        return Ok(record(req.time, frame, chosen, false));
+    };
+    let span = p.goal.x - p.state.x;
+    let line = p.reference_line().map_err(|e| e.to_string())?;
+    let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
+    let mut best: Option<(f64, Chosen)> = None;
+    for &pace in &pacing.speeds {
+        let margin = pacing.time_margin + pacing.schedule_slip(pace);
+        let mut problem = p.clone();
+        problem.t_f = p.t_k + span / pace;
+        problem.obstacles = p
+            .obstacles
+            .iter()
+            .flat_map(|o| {
+                if o.vx == 0.0 && o.vy == 0.0 {
+                    vec![*o]
+                } else {
+                    sweep(o, margin, p.state.x, p.state.y, p.vehicle_radius)
                 }
+            })
+            .collect();
+        if let Some(c) = solve_one(&problem, req.steer_limit)? {
+            let score = pacing.score(
+                c.trajectory.path().reference_cost(&line) / span.abs(),
+                pace,
+                fastest,
+            );
+            if best.as_ref().is_none_or(|b| score < b.0) {
+                best = Some((score, c));
             }
         }
-        Ok(record(req, best.map(|b| b.1), true))
-    };
-    PlanOutcome {
-        time: req.time,
-        result: run(),
     }
+    Ok(record(req.time, frame, best.map(|b| b.1), true))
 }
 
 /// The chosen path of one planning problem: the planner's a6 when its path is within
@@ -712,12 +886,13 @@ struct Chosen {
 }
 
 fn record(
-    req: &PlanRequest,
+    time: f64,
+    frame: &PathFrame,
     chosen: Option<Chosen>,
     moving: bool,
 ) -> (Option<Trajectory>, PlanRecord) {
     let record = PlanRecord {
-        time: req.time,
+        time,
         feasible: chosen.is_some(),
         a6: chosen.as_ref().map(|c| c.a6),
         projected_to_boundary: chosen.as_ref().is_some_and(|c| c.projected),
@@ -729,7 +904,7 @@ fn record(
             (0..=40)
                 .map(|j| {
                     let x = p.x_k() + p.span() * f64::from(j) / 40.0;
-                    let (wx, wy) = req.frame.to_world(x, p.y(x));
+                    let (wx, wy) = frame.to_world(x, p.y(x));
                     [wx, wy]
                 })
                 .collect()
@@ -891,8 +1066,33 @@ mod tests {
             vx: 0.0,
             vy: 0.0,
         };
+        // Farther than the horizon, the car drives towards a local goal before it.
         assert!(matches!(
             replan_and_follow(&mut nav, &pose, &[blocker]),
+            Guidance::Drive { .. }
+        ));
+        // A blocked goal: local goals stop short of it, outside the inflated blocker,
+        // and once the car is there no path is left: a controlled stop beside it.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let heading = 15f64.atan2(30.0);
+        let along = |d: f64| Pose {
+            x: d * heading.cos(),
+            y: d * heading.sin(),
+            theta: heading,
+            ..pose
+        };
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        // Progress along the route follows the car tick by tick.
+        for d in 0..=29 {
+            nav.follow(&along(f64::from(d)));
+            let g = nav.local_goal(f64::from(d), &[blocker]);
+            assert!(
+                (g.x - 30.0).hypot(g.y - 15.0) > blocker.radius + r0,
+                "{d}: {g:?}"
+            );
+        }
+        assert!(matches!(
+            replan_and_follow(&mut nav, &along(29.8), &[blocker]),
             Guidance::Stop { .. }
         ));
     }

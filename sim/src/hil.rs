@@ -26,6 +26,8 @@ use ugv_controller::trace::FixTiming;
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
+use crate::record::tap::SocketTap;
+use crate::record::{RecordError, RecordMode, Recorder, Recording, RunInfo};
 use crate::run::{Jitter, Outcome, Sim, SimError, Snapshot};
 use crate::scenario::Scenario;
 use crate::verdict::{Verdict, write_results};
@@ -63,6 +65,8 @@ pub enum HilError {
     },
     #[error("writing the results: {0}")]
     Results(#[from] crate::verdict::ResultsError),
+    #[error("recording: {0}")]
+    Record(#[from] crate::record::RecordError),
 }
 
 /// Where the wires are, for the user and for the controller.
@@ -416,6 +420,7 @@ pub fn run_hil(
     stop: &AtomicBool,
     status_every: f64,
     status: &mut dyn FnMut(&Snapshot),
+    mut recording: Option<&mut Recording<SocketTap>>,
 ) -> Result<(Outcome, u64), HilError> {
     let mut clock = WallClock::new(sim.dt());
     let started = clock.start_monotonic_ns();
@@ -435,6 +440,10 @@ pub fn run_hil(
         let now = k as f64 * sim.dt();
         let outcome = sim.step(clock.now(), late)?;
         let out = sim.take_outputs();
+        if let Some(r) = recording.as_deref_mut() {
+            r.sensors(now, &out);
+            r.after_step(now, sim, None);
+        }
         if let Some(epoch) = &out.gps {
             wires.gps.enqueue(epoch);
         }
@@ -482,6 +491,8 @@ pub struct HilOptions {
     /// [`crate::isolate`]): the CAN interface is created there, and no process
     /// outside can open it.
     pub isolate: Option<String>,
+    /// Record the run into `results` (see [`crate::record`]).
+    pub record: bool,
 }
 
 /// Run `scenario` in HIL with the controller configured by `config`: open the wires,
@@ -532,6 +543,21 @@ pub fn run_scenario(
     };
     let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
     let mut sim = Sim::new(sc.clone(), steering, throttle).with_sensors()?;
+    let mut recording = match options.record {
+        true => {
+            let tap = SocketTap::open(&iface).map_err(|source| RecordError::Tap {
+                iface: iface.clone(),
+                source,
+            })?;
+            let toml = toml::to_string_pretty(config).unwrap_or_default();
+            let info = RunInfo::of(RecordMode::Hil, sc, toml);
+            Some(Recording::new(
+                Recorder::create(&options.results, sc, info)?,
+                tap,
+            ))
+        }
+        false => None,
+    };
     let gps_link = options
         .gps_link
         .clone()
@@ -619,7 +645,11 @@ pub fn run_scenario(
         stop,
         options.status_every,
         status,
+        recording.as_mut(),
     );
+    if let Some(r) = recording {
+        log(&crate::record::describe(&r.finish()));
+    }
     // Whatever happened, the controller is asked to finish and its trace collected.
     let trace = controller.as_mut().and_then(|c| {
         let exit = c.finish(Duration::from_secs(5));

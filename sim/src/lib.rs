@@ -12,6 +12,7 @@ pub mod devices;
 pub mod ecu;
 pub mod mission;
 pub mod plot;
+pub mod record;
 pub mod run;
 pub mod scenario;
 pub mod sil;

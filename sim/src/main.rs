@@ -30,6 +30,7 @@ use ugv_sim::ecu::station::run_standalone;
 use ugv_sim::hil::{self, HilOptions};
 use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::run::Snapshot;
+use ugv_sim::sil::Hook;
 use ugv_sim::verdict::{Verdict, write_results};
 use ugv_sim::{Outcome, Scenario};
 
@@ -79,6 +80,14 @@ enum Command {
         #[arg(long, default_value_t = 1.0, value_parser = number(0.001, 3600.0, "seconds"))]
         status_every: f64,
     },
+    /// Replay a recording (run.mcap) into the controller library in lockstep and
+    /// compare its commands with the recorded ones: exactly for a SIL recording,
+    /// within the HIL tolerance for a HIL one (see the README). Prints the report as
+    /// JSON. Exit code 0 when they agree, 1 at a divergence, 4 on error.
+    Replay {
+        /// The recording (run.mcap of a run's results).
+        recording: PathBuf,
+    },
     /// Validate scenario files: parse, check every field, and report the first error
     /// of each with its file, line and field.
     Check {
@@ -117,6 +126,10 @@ struct SuiteArgs {
     /// then never share a bus, and --jobs N runs N at a time.
     #[arg(long)]
     isolate: bool,
+    /// Record every run (run.mcap, bus.log, gps.nmea) in a folder of its own under
+    /// --results.
+    #[arg(long)]
+    record: bool,
     /// Run every scenario (and grid point) with this many seeds, 1 to 100000: the
     /// scenario's own, then seeds derived from it.
     #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
@@ -188,6 +201,14 @@ struct RunArgs {
     /// (needs root). Look in with `sudo ip netns exec ugv-RUN_ID candump IFACE`.
     #[arg(long)]
     isolate: bool,
+    /// Do not record the run (by default run.mcap, bus.log and gps.nmea go into the
+    /// results directory; see the README).
+    #[arg(long)]
+    no_record: bool,
+    /// SIL only: at most this many times faster than real time (1: real time), 0.01
+    /// to 10000; for watching a run as it goes, or stopping it midway.
+    #[arg(long, value_parser = number(0.01, 10_000.0, "times real time"))]
+    pace: Option<f64>,
 }
 
 fn main() -> ExitCode {
@@ -270,6 +291,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             status_every,
         } => run_ecu(kind, &can, scenario.as_ref(), status_every),
         Command::Suite(args) => run_suite(args),
+        Command::Replay { recording } => replay(&recording),
         Command::Merge { shards, out } => merge_shards(&shards, &out),
     }
 }
@@ -321,6 +343,48 @@ fn run_ecu(
     Ok(ExitCode::SUCCESS)
 }
 
+fn replay(path: &std::path::Path) -> Result<ExitCode> {
+    use ugv_sim::record::replay::{Recorded, Tolerance, replay};
+    let started = std::time::Instant::now();
+    let rec = Recorded::read(path)?;
+    if let Some(why) = &rec.truncated {
+        eprintln!(
+            "ugv-sim: {} ends early ({why}): replaying what it holds",
+            path.display()
+        );
+    }
+    let report = replay(&rec, Tolerance::for_mode(rec.info.mode))?;
+    let wall = started.elapsed().as_secs_f64();
+    let compared: u64 = report.messages.values().map(|m| m.replayed).sum();
+    eprintln!(
+        "ugv-sim: replayed {:.1} s of {:?} ({:?} recording) in {wall:.2} s ({:.0}x real time): {compared} commands, {}",
+        report.replayed_s,
+        report.scenario,
+        report.mode,
+        report.replayed_s / wall.max(1e-9),
+        match &report.divergence {
+            None => "all as recorded".to_owned(),
+            Some(d) => format!(
+                "first divergence at {:.3} s in {}{}: recorded {}, replayed {}",
+                d.time_s,
+                d.message,
+                d.signal
+                    .as_ref()
+                    .map(|s| format!(".{s}"))
+                    .unwrap_or_default(),
+                d.recorded.as_deref().unwrap_or("nothing"),
+                d.replayed.as_deref().unwrap_or("nothing"),
+            ),
+        }
+    );
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(if report.identical() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
 fn exit_code(outcome: &Outcome) -> u8 {
     match outcome {
         Outcome::GoalReached { .. } => 0,
@@ -359,10 +423,25 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         !(args.sil && args.isolate),
         "--isolate is for HIL runs (SIL has no wires)"
     );
+    anyhow::ensure!(
+        args.sil || args.pace.is_none(),
+        "--pace is for SIL runs (HIL runs in real time)"
+    );
     if args.sil {
         let started = std::time::Instant::now();
-        let run = ugv_sim::sil::run_sil(sc.clone(), &cfg)?;
+        let record = (!args.no_record).then_some(args.results.as_path());
+        let pace = args.pace;
+        let paced = move |t: f64, _: &mut ugv_sim::sil::SilController| {
+            if let Some(due) = pace.map(|p| std::time::Duration::from_secs_f64(t / p)) {
+                std::thread::sleep(due.saturating_sub(started.elapsed()));
+            }
+            Hook::Continue
+        };
+        let run = ugv_sim::sil::run_sil_recorded(sc.clone(), &cfg, paced, record)?;
         let wall = started.elapsed().as_secs_f64();
+        if let Some(s) = &run.recording {
+            eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
+        }
         let report = run.sim.report(run.outcome.clone());
         let verdict = Verdict::judge("sil", &sc, report, Some(&run.trace));
         eprintln!(
@@ -395,6 +474,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         run_id,
         results: args.results.clone(),
         status_every: args.status_every,
+        record: !args.no_record,
     };
     let stop = stop_on_signal()?;
     let tty = std::io::stderr().is_terminal();
@@ -437,6 +517,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         controller,
         cans,
         isolate,
+        record,
         seeds,
         vary,
         shard,
@@ -487,7 +568,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         cfg.follower.anfis_model = anfis_model.clone();
         cfg
     };
-    let sil = suite::sil_runner(&tune);
+    let sil = suite::sil_runner_recording(&tune, record.then_some(results.as_path()));
     let stop = stop_on_signal()?;
     let controller = match controller {
         Some(c) => c,
@@ -499,16 +580,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             sc.can.interface = can.clone();
         }
         // The item's id as a name for folders, services and namespaces.
-        let slug: String = id
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
+        let slug = suite::item_dir_name(id);
         let run_id = format!("suite-{slug}-{}", std::process::id());
         let options = HilOptions {
             controller: Some(controller.clone()),
@@ -519,6 +591,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             run_id,
             results: results.join(&slug),
             status_every: 1.0,
+            record,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
         hil::run_scenario(&sc, &tune(&sc), &options, &stop, &mut |_| {}, &mut |_| {})

@@ -11,6 +11,7 @@ use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError};
 use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
 use ugv_controller::trace::Trace;
 
+use crate::record::{RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo};
 use crate::run::{Outcome, Sim, SimError};
 use crate::scenario::Scenario;
 
@@ -23,6 +24,8 @@ pub enum SilError {
     Controller(#[from] ControllerError),
     #[error("controller CAN: {0}")]
     Bus(#[from] BridgeError),
+    #[error("recording: {0}")]
+    Record(#[from] RecordError),
     #[error(
         "SIL plays every device in-process, but the device map puts {0} outside (run it in HIL, without --sil)"
     )]
@@ -39,6 +42,8 @@ pub struct SilRun {
     pub controller_exit: Option<Exit>,
     /// What its ports delivered that it could not use.
     pub inputs: InputStats,
+    /// The recording, when one was made ([`run_sil_recorded`]).
+    pub recording: Option<RecordSummary>,
 }
 
 /// The controller as SIL runs it: the library's loop on memory ports.
@@ -62,7 +67,18 @@ pub fn run_sil(scenario: Scenario, cfg: &ControllerConfig) -> Result<SilRun, Sil
 pub fn run_sil_with(
     scenario: Scenario,
     cfg: &ControllerConfig,
+    hook: impl FnMut(f64, &mut SilController) -> Hook,
+) -> Result<SilRun, SilError> {
+    run_sil_recorded(scenario, cfg, hook, None)
+}
+
+/// [`run_sil_with`], recorded into the directory `record` when given (see
+/// [`crate::record`]).
+pub fn run_sil_recorded(
+    scenario: Scenario,
+    cfg: &ControllerConfig,
     mut hook: impl FnMut(f64, &mut SilController) -> Hook,
+    record: Option<&std::path::Path>,
 ) -> Result<SilRun, SilError> {
     if !scenario.devices.all_simulated() {
         return Err(SilError::PhysicalDevice(format!("{:?}", scenario.devices)));
@@ -85,6 +101,17 @@ pub fn run_sil_with(
         MemLaser::default(),
         CanPort::new(bus.endpoint(), "sil"),
     );
+    let mut rec = match record {
+        Some(dir) => {
+            let toml = toml::to_string_pretty(cfg).unwrap_or_default();
+            let info = RunInfo::of(RecordMode::Sil, &scenario, toml);
+            Some(Recording::new(
+                Recorder::create(dir, &scenario, info)?,
+                bus.endpoint(),
+            ))
+        }
+        None => None,
+    };
     let dt = sim.dt();
     let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
     let mut exit = None;
@@ -94,6 +121,9 @@ pub fn run_sil_with(
         let now = k as f64 * dt;
         let outcome = sim.step(now, 0.0)?;
         let out = sim.take_outputs();
+        if let Some(r) = &mut rec {
+            r.sensors(now, &out);
+        }
         if let Some(epoch) = out.gps {
             rt.gps_mut().push(epoch.text.as_bytes());
         }
@@ -111,6 +141,9 @@ pub fn run_sil_with(
                 exit = Some(e);
             }
         }
+        if let Some(r) = &mut rec {
+            r.after_step(now, &sim, Some(rt.controller()));
+        }
         if let Some(o) = outcome {
             break o;
         }
@@ -122,5 +155,6 @@ pub fn run_sil_with(
         trace,
         controller_exit: exit,
         inputs: rt.stats.clone(),
+        recording: rec.map(Recording::finish),
     })
 }

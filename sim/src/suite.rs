@@ -15,7 +15,7 @@ use ugv_controller::config::ControllerConfig;
 
 use crate::mission::controller_config;
 use crate::scenario::Scenario;
-use crate::sil::run_sil;
+use crate::sil::{Hook, run_sil_recorded};
 use crate::sweep::{Percentiles, Plan, PlanInfo, Shard, wilson95};
 use crate::verdict::Verdict;
 
@@ -87,13 +87,46 @@ fn run_one(plan: &Plan, index: usize, slot: usize, runner: &Runner<'_>) -> Suite
     }
 }
 
+/// An item's id as the name of its folder (and of a HIL run's services and
+/// namespace): letters, digits, `-` and `_` kept, anything else `_`.
+pub fn item_dir_name(id: &str) -> String {
+    id.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 /// The SIL runner: the controller library in lockstep, configured by `tune`.
 pub fn sil_runner<'a>(
     tune: &'a (dyn Fn(&Scenario) -> ControllerConfig + Sync),
 ) -> impl Fn(&str, &Scenario, usize) -> Result<Verdict, String> + Sync + 'a {
-    move |_, sc, _| {
+    sil_runner_recording(tune, None)
+}
+
+/// [`sil_runner`], each run recorded (see [`crate::record`]) in a folder of its own
+/// under `record` when given, named by [`item_dir_name`].
+pub fn sil_runner_recording<'a>(
+    tune: &'a (dyn Fn(&Scenario) -> ControllerConfig + Sync),
+    record: Option<&'a Path>,
+) -> impl Fn(&str, &Scenario, usize) -> Result<Verdict, String> + Sync + 'a {
+    move |id, sc, _| {
         let cfg = tune(sc);
-        let run = run_sil(sc.clone(), &cfg).map_err(|e| e.to_string())?;
+        let dir = match record {
+            Some(root) => {
+                let dir = root.join(item_dir_name(id));
+                std::fs::create_dir_all(&dir)
+                    .map_err(|e| format!("creating {}: {e}", dir.display()))?;
+                Some(dir)
+            }
+            None => None,
+        };
+        let run = run_sil_recorded(sc.clone(), &cfg, |_, _| Hook::Continue, dir.as_deref())
+            .map_err(|e| e.to_string())?;
         Ok(Verdict::judge(
             "sil",
             sc,

@@ -1,0 +1,615 @@
+//! Replay: a recording's GPS bytes, laser frames and ECU reports fed into the
+//! controller library (its loop on memory ports) in lockstep, and the commands it
+//! sends compared with the recorded ones.
+//!
+//! Inputs go in at the controller tick at or after their log time, as SIL's loop
+//! delivers them; the controller ticks on SIL's grid (every `COMMAND_PERIOD` on the
+//! physics steps). A SIL recording therefore replays byte for byte
+//! ([`Tolerance::EXACT`]). A HIL recording was made with the controller in a process of
+//! its own, on its own clock and behind a paced serial line, so its commands come at
+//! other instants than the replay's: it is compared with [`Tolerance::HIL`], which
+//! pairs each replayed command with the recorded one of the same message nearest in
+//! time and compares signal values within bounds (README, "Replay").
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use embedded_can::Frame;
+use firmware_bridge::CanPort;
+use firmware_bridge::can::membus::{MemBus, MemEndpoint, MemFrame};
+use firmware_bridge::laser::LaserFrame;
+use firmware_bridge::nmea::ReaderConfig;
+use foxglove::Decode;
+use foxglove::schemas::LaserScan;
+use golf_car_can::spec::NetworkSpec;
+use serde::Serialize;
+use ugv_controller::config::ControllerConfig;
+use ugv_controller::core::{COMMAND_PERIOD, Controller};
+use ugv_controller::runtime::{MemGps, MemLaser, Runtime};
+
+use super::tap::{BusTap, TapFrame};
+use super::{CONFIG_ATTACHMENT, RUN_METADATA, RecordMode, RunInfo, topics};
+
+/// Why a recording cannot be replayed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error("reading {path}: {source}")]
+    Read {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path} is not an MCAP file: {source}")]
+    NotMcap {
+        path: String,
+        #[source]
+        source: mcap::McapError,
+    },
+    #[error(
+        "{path} is not a ugv-hil recording: it has no {RUN_METADATA:?} metadata record (or it was cut off before one)"
+    )]
+    Foreign { path: String },
+    #[error("{path}: metadata {RUN_METADATA:?}, field {field}: {message}")]
+    BadInfo {
+        path: String,
+        field: String,
+        message: String,
+    },
+    #[error("{path}: no {CONFIG_ATTACHMENT} attachment (the controller's configuration)")]
+    NoConfig { path: String },
+    #[error("{path}: {CONFIG_ATTACHMENT}: {source}")]
+    Config {
+        path: String,
+        #[source]
+        source: ugv_controller::config::ConfigError,
+    },
+    #[error("{path}: message {index} on {topic}: {message}")]
+    BadMessage {
+        path: String,
+        index: usize,
+        topic: String,
+        message: String,
+    },
+    #[error("the controller: {0}")]
+    Controller(#[from] ugv_controller::core::ControllerError),
+    #[error("golf_car.dbc: {0}")]
+    Dbc(#[from] golf_car_can::spec::SpecError),
+}
+
+/// One input the controller received.
+#[derive(Debug)]
+enum Input {
+    Gps(Vec<u8>),
+    Laser(Box<LaserFrame>),
+    Can { id: u16, data: Vec<u8> },
+}
+
+/// A frame on the bus, at its log time.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Command {
+    ns: u64,
+    id: u32,
+    data: Vec<u8>,
+}
+
+/// A recording read back.
+#[derive(Debug)]
+pub struct Recorded {
+    pub info: RunInfo,
+    pub config: ControllerConfig,
+    inputs: Vec<(u64, Input)>,
+    commands: Vec<Command>,
+    /// Why reading stopped before the file's end (a recording cut off by a kill).
+    pub truncated: Option<String>,
+    /// Frames the replay cannot inject (extended IDs: not on this bus).
+    pub skipped: u64,
+}
+
+fn field<T: serde::de::DeserializeOwned>(
+    path: &str,
+    meta: &BTreeMap<String, String>,
+    key: &str,
+) -> Result<T, ReplayError> {
+    let bad = |message: String| ReplayError::BadInfo {
+        path: path.to_owned(),
+        field: key.to_owned(),
+        message,
+    };
+    let text = meta.get(key).ok_or_else(|| bad("missing".to_owned()))?;
+    serde_json::from_str(text).map_err(|e| bad(e.to_string()))
+}
+
+fn f32_meta(meta: &BTreeMap<String, String>, key: &str) -> Result<f32, String> {
+    meta.get(key)
+        .ok_or_else(|| format!("the channel's metadata has no {key}"))?
+        .parse()
+        .map_err(|e| format!("the channel's metadata {key}: {e}"))
+}
+
+fn hex_bytes(text: &str) -> Option<Vec<u8>> {
+    if !text.len().is_multiple_of(2) || text.len() > 16 {
+        return None;
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok())
+        .collect()
+}
+
+impl Recorded {
+    /// Read `path`; a file cut off (no summary, a partial last record) is read up to
+    /// its last whole record, and [`Recorded::truncated`] says where it stopped.
+    pub fn read(path: &Path) -> Result<Recorded, ReplayError> {
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| ReplayError::Read {
+            path: name.clone(),
+            source,
+        })?;
+        Recorded::parse(&name, &bytes)
+    }
+
+    /// Read an MCAP held in memory; `name` names it in errors.
+    pub fn parse(name: &str, bytes: &[u8]) -> Result<Recorded, ReplayError> {
+        use mcap::records::Record;
+        let options = mcap::read::Options::IgnoreEndMagic.into();
+        let reader =
+            mcap::read::ChunkFlattener::new_with_options(bytes, options).map_err(|source| {
+                ReplayError::NotMcap {
+                    path: name.to_owned(),
+                    source,
+                }
+            })?;
+        let mut channels: HashMap<u16, mcap::records::Channel> = HashMap::new();
+        let mut info_meta = None;
+        let mut config_text = None;
+        let mut messages = Vec::new();
+        let mut truncated = None;
+        for (n, record) in reader.enumerate() {
+            match record {
+                Ok(Record::Channel(c)) => {
+                    channels.insert(c.id, c);
+                }
+                Ok(Record::Metadata(m)) if m.name == RUN_METADATA => info_meta = Some(m.metadata),
+                Ok(Record::Attachment { header, data, .. }) if header.name == CONFIG_ATTACHMENT => {
+                    config_text = Some(String::from_utf8_lossy(&data).into_owned());
+                }
+                Ok(Record::Message { header, data }) => {
+                    messages.push((header.channel_id, header.log_time, data.into_owned()));
+                }
+                Ok(_) => {}
+                // Not even the first record: not an MCAP file.
+                Err(source) if n == 0 => {
+                    return Err(ReplayError::NotMcap {
+                        path: name.to_owned(),
+                        source,
+                    });
+                }
+                Err(e) => {
+                    truncated = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        let meta = info_meta.ok_or_else(|| ReplayError::Foreign {
+            path: name.to_owned(),
+        })?;
+        let info = RunInfo {
+            mode: field(name, &meta, "mode")?,
+            scenario: field(name, &meta, "scenario")?,
+            physics_hz: field(name, &meta, "physics_hz")?,
+            epoch_unix_ns: field(name, &meta, "epoch_unix_ns")?,
+            can_interface: field(name, &meta, "can_interface")?,
+            gps_sentences: field(name, &meta, "gps_sentences")?,
+            controller_toml: config_text.clone().ok_or_else(|| ReplayError::NoConfig {
+                path: name.to_owned(),
+            })?,
+        };
+        if !(info.physics_hz.is_finite() && info.physics_hz > 0.0) {
+            return Err(ReplayError::BadInfo {
+                path: name.to_owned(),
+                field: "physics_hz".to_owned(),
+                message: format!("{} is not a positive rate", info.physics_hz),
+            });
+        }
+        let config = ControllerConfig::from_toml(
+            &info.controller_toml,
+            &format!("{name}: {CONFIG_ATTACHMENT}"),
+        )
+        .map_err(|source| ReplayError::Config {
+            path: name.to_owned(),
+            source,
+        })?;
+        let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?;
+        let mut inputs = Vec::new();
+        let mut commands = Vec::new();
+        let mut skipped = 0;
+        for (index, (channel, ns, data)) in messages.into_iter().enumerate() {
+            let Some(ch) = channels.get(&channel) else {
+                continue;
+            };
+            let bad = |message: String| ReplayError::BadMessage {
+                path: name.to_owned(),
+                index,
+                topic: ch.topic.clone(),
+                message,
+            };
+            let json = || {
+                serde_json::from_slice::<serde_json::Value>(&data).map_err(|e| bad(e.to_string()))
+            };
+            match ch.topic.as_str() {
+                topics::NMEA => {
+                    let v = json()?;
+                    let s = v["sentence"]
+                        .as_str()
+                        .ok_or_else(|| bad("no \"sentence\" text".to_owned()))?;
+                    inputs.push((ns, Input::Gps(format!("{s}\r\n").into_bytes())));
+                }
+                topics::LASER => {
+                    let scan =
+                        LaserScan::decode(data.as_slice()).map_err(|e| bad(e.to_string()))?;
+                    let frame = laser_frame(&ch.metadata, &scan).map_err(bad)?;
+                    inputs.push((ns, Input::Laser(frame)));
+                }
+                topics::CAN_RAW => {
+                    let v = json()?;
+                    let id = v["id"]
+                        .as_u64()
+                        .and_then(|i| u32::try_from(i).ok())
+                        .ok_or_else(|| bad("no numeric \"id\"".to_owned()))?;
+                    let bytes = v["data"]
+                        .as_str()
+                        .and_then(hex_bytes)
+                        .ok_or_else(|| bad("\"data\" is not 0 to 8 hex bytes".to_owned()))?;
+                    let extended = v["extended"].as_bool().unwrap_or(false);
+                    if super::direction(&spec, id) == "rx" {
+                        commands.push(Command {
+                            ns,
+                            id,
+                            data: bytes,
+                        });
+                    } else {
+                        match u16::try_from(id) {
+                            Ok(id) if !extended && id < 0x800 => {
+                                inputs.push((ns, Input::Can { id, data: bytes }));
+                            }
+                            _ => skipped += 1,
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(Recorded {
+            info,
+            config,
+            inputs,
+            commands,
+            truncated,
+            skipped,
+        })
+    }
+}
+
+/// The laser frame a `foxglove.LaserScan` of the recording carries (its constant
+/// fields in the channel's metadata).
+fn laser_frame(
+    meta: &BTreeMap<String, String>,
+    scan: &LaserScan,
+) -> Result<Box<LaserFrame>, String> {
+    let mut f = Box::<LaserFrame>::default();
+    f.angle_min = f32_meta(meta, "angle_min")?;
+    f.angle_increment = f32_meta(meta, "angle_increment")?;
+    f.time_increment = f32_meta(meta, "time_increment")?;
+    f.scan_time = f32_meta(meta, "scan_time")?;
+    f.range_min = f32_meta(meta, "range_min")?;
+    f.range_max = f32_meta(meta, "range_max")?;
+    f.stamp_ns = scan.timestamp.map_or(0, |t| t.total_nanos());
+    let ranges: Vec<f32> = scan.ranges.iter().map(|r| *r as f32).collect();
+    let intensities: Vec<f32> = scan.intensities.iter().map(|r| *r as f32).collect();
+    f.set_beams(&ranges, &intensities)
+        .map_err(|e| e.to_string())?;
+    Ok(f)
+}
+
+/// How close a replayed command must come to the recorded one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Tolerance {
+    /// How far apart in time a replayed and a recorded command may be, seconds.
+    pub window_s: f64,
+    /// How far each signal may differ, in units of its DBC scale factor (0: the
+    /// bytes must be equal, counter and CRC included).
+    pub steps: f64,
+}
+
+impl Tolerance {
+    /// SIL: the same frames, bytes and instants.
+    pub const EXACT: Tolerance = Tolerance {
+        window_s: 0.0,
+        steps: 0.0,
+    };
+    /// HIL: within two command periods, signals within 10 scale steps (0.1 degree
+    /// of steering, 0.1 m/s of speed); counter and CRC not compared (they follow the
+    /// number of frames sent, which the two runs need not share).
+    pub const HIL: Tolerance = Tolerance {
+        window_s: 2.0 * COMMAND_PERIOD,
+        steps: 10.0,
+    };
+
+    pub fn for_mode(mode: RecordMode) -> Tolerance {
+        match mode {
+            RecordMode::Sil => Tolerance::EXACT,
+            RecordMode::Hil => Tolerance::HIL,
+        }
+    }
+}
+
+/// Where the replay first differed from the recording.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Divergence {
+    /// Simulated seconds.
+    pub time_s: f64,
+    pub message: String,
+    /// The first signal that differs (absent when a frame is missing or extra).
+    pub signal: Option<String>,
+    pub recorded: Option<String>,
+    pub replayed: Option<String>,
+}
+
+/// Per message: commands compared and the largest signal difference.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct MessageStats {
+    pub replayed: u64,
+    pub recorded: u64,
+    pub matched: u64,
+    /// Largest |replayed - recorded| per signal, physical units.
+    pub max_diff: BTreeMap<String, f64>,
+}
+
+/// What a replay found.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplayReport {
+    pub scenario: String,
+    pub mode: RecordMode,
+    pub tolerance: Tolerance,
+    /// Simulated seconds replayed.
+    pub replayed_s: f64,
+    pub inputs: u64,
+    pub divergence: Option<Divergence>,
+    pub messages: BTreeMap<String, MessageStats>,
+    /// Why the recording ended before its file did, if it did.
+    pub truncated: Option<String>,
+    pub skipped_frames: u64,
+    /// How the controller's loop ended during the replay, if it did.
+    pub controller_exit: Option<String>,
+}
+
+impl ReplayReport {
+    /// Whether the replay produced the recorded commands.
+    pub fn identical(&self) -> bool {
+        self.divergence.is_none()
+    }
+}
+
+struct Comparer<'a> {
+    spec: &'a NetworkSpec,
+    tol: Tolerance,
+    recorded: Vec<(Command, bool)>,
+    /// Recorded commands before this index are matched or out of the window.
+    first_open: usize,
+    messages: BTreeMap<String, MessageStats>,
+    divergence: Option<Divergence>,
+    epoch_ns: u64,
+}
+
+impl Comparer<'_> {
+    fn name(&self, id: u32) -> String {
+        u16::try_from(id)
+            .ok()
+            .and_then(|i| self.spec.message(i))
+            .map_or_else(|| format!("{id:#x}"), |m| m.name.to_string())
+    }
+
+    fn time(&self, ns: u64) -> f64 {
+        ns.saturating_sub(self.epoch_ns) as f64 * 1e-9
+    }
+
+    fn diverge(&mut self, d: Divergence) {
+        if self.divergence.is_none() {
+            self.divergence = Some(d);
+        }
+    }
+
+    /// Signals of a frame, physical values; Counter and Crc left out unless exact.
+    fn signals(&self, id: u32, data: &[u8]) -> Vec<(String, f64, f64)> {
+        let Some(m) = u16::try_from(id).ok().and_then(|i| self.spec.message(i)) else {
+            return Vec::new();
+        };
+        let Ok(p) = golf_car_can::codec::payload("", data) else {
+            return Vec::new();
+        };
+        m.signals
+            .iter()
+            .zip(m.decode_all(&p))
+            .filter(|(_, v)| self.tol.steps == 0.0 || !matches!(v.name, "Counter" | "Crc"))
+            .map(|(s, v)| (v.name.to_owned(), v.value, s.factor.abs()))
+            .collect()
+    }
+
+    /// Recorded commands that fell out of the window before `ns` without a match.
+    fn close_before(&mut self, ns: u64) {
+        let window = (self.tol.window_s * 1e9).round() as u64;
+        while let Some((c, matched)) = self.recorded.get(self.first_open) {
+            if c.ns.saturating_add(window) >= ns {
+                break;
+            }
+            if !matched {
+                let d = Divergence {
+                    time_s: self.time(c.ns),
+                    message: self.name(c.id),
+                    signal: None,
+                    recorded: Some(hex(&c.data)),
+                    replayed: None,
+                };
+                self.diverge(d);
+            }
+            self.first_open += 1;
+        }
+    }
+
+    fn replayed(&mut self, ns: u64, id: u32, data: &[u8]) {
+        let name = self.name(id);
+        self.messages.entry(name.clone()).or_default().replayed += 1;
+        let window = (self.tol.window_s * 1e9).round() as u64;
+        // The earliest open recorded frame of the same message within the window.
+        let candidate = self.recorded[self.first_open..]
+            .iter()
+            .position(|(c, matched)| {
+                !matched && c.id == id && c.ns + window >= ns && c.ns <= ns + window
+            })
+            .map(|i| i + self.first_open);
+        let Some(i) = candidate else {
+            let d = Divergence {
+                time_s: self.time(ns),
+                message: name,
+                signal: None,
+                recorded: None,
+                replayed: Some(hex(data)),
+            };
+            self.diverge(d);
+            return;
+        };
+        self.recorded[i].1 = true;
+        let rec = self.recorded[i].0.clone();
+        let ours = self.signals(id, data);
+        let theirs = self.signals(id, &rec.data);
+        let mut first_bad = None;
+        for ((signal, a, factor), (_, b, _)) in ours.iter().zip(&theirs) {
+            let diff = (a - b).abs();
+            let stats = self.messages.entry(name.clone()).or_default();
+            let max = stats.max_diff.entry(signal.clone()).or_insert(0.0);
+            *max = max.max(diff);
+            if first_bad.is_none() && diff > self.tol.steps * factor + 1e-9 {
+                first_bad = Some((signal.clone(), *b, *a));
+            }
+        }
+        if self.tol.steps == 0.0 && first_bad.is_none() && data != rec.data.as_slice() {
+            first_bad = Some(("(bytes)".to_owned(), 0.0, 0.0));
+        }
+        match first_bad {
+            Some((signal, recorded, replayed)) => {
+                let d = Divergence {
+                    time_s: self.time(ns),
+                    message: name,
+                    recorded: Some(format!("{recorded} ({})", hex(&rec.data))),
+                    replayed: Some(format!("{replayed} ({})", hex(data))),
+                    signal: Some(signal),
+                };
+                self.diverge(d);
+            }
+            None => self.messages.entry(name).or_default().matched += 1,
+        }
+    }
+}
+
+fn hex(data: &[u8]) -> String {
+    data.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+/// Replay `rec` into the controller library and compare its commands with the
+/// recorded ones within `tol`.
+pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayError> {
+    let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?;
+    let bus = MemBus::new();
+    let mut rt = Runtime::new(
+        Controller::new(&rec.config)?,
+        MemGps::new(ReaderConfig {
+            complete_when: rec.info.gps_sentences,
+            ..ReaderConfig::default()
+        }),
+        MemLaser::default(),
+        CanPort::new(bus.endpoint(), "replay"),
+    );
+    // The ECUs' side of the bus: recorded reports go out, the controller's come in.
+    let mut ecus: MemEndpoint = bus.endpoint();
+    let mut heard: Vec<TapFrame> = Vec::new();
+    let mut cmp = Comparer {
+        spec: &spec,
+        tol,
+        recorded: rec.commands.iter().cloned().map(|c| (c, false)).collect(),
+        first_open: 0,
+        messages: BTreeMap::new(),
+        divergence: None,
+        epoch_ns: rec.info.epoch_unix_ns,
+    };
+    for c in &rec.commands {
+        let name = cmp.name(c.id);
+        cmp.messages.entry(name).or_default().recorded += 1;
+    }
+    let last_ns = rec
+        .inputs
+        .last()
+        .map(|(ns, _)| *ns)
+        .max(rec.commands.last().map(|c| c.ns))
+        .unwrap_or(rec.info.epoch_unix_ns);
+    let ns_of = |t: f64| rec.info.epoch_unix_ns + (t.max(0.0) * 1e9).round() as u64;
+    // SIL's grid: the controller ticks on every control_every-th physics step.
+    let dt = 1.0 / rec.info.physics_hz;
+    let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
+    let mut next_input = 0;
+    let mut k: u64 = 0;
+    let mut exit = None;
+    let mut replayed_s = 0.0;
+    loop {
+        let now = k as f64 * dt;
+        let tick_ns = ns_of(now);
+        if tick_ns > last_ns {
+            break;
+        }
+        while let Some((ns, input)) = rec.inputs.get(next_input) {
+            if *ns > tick_ns {
+                break;
+            }
+            match input {
+                Input::Gps(bytes) => rt.gps_mut().push(bytes),
+                Input::Laser(frame) => rt.laser_mut().push(frame.clone()),
+                Input::Can { id, data } => {
+                    // A standard ID (checked when read) and at most 8 bytes; the
+                    // memory bus never fails.
+                    if let Some(f) =
+                        embedded_can::StandardId::new(*id).and_then(|sid| MemFrame::new(sid, data))
+                    {
+                        let _ = embedded_can::nb::Can::transmit(&mut ecus, &f);
+                    }
+                }
+            }
+            next_input += 1;
+        }
+        if let Some(e) = rt.step(now) {
+            exit = Some(e.describe());
+        }
+        replayed_s = now;
+        // Only the controller talks to this endpoint (a node never hears itself).
+        let _ = ecus.drain(&mut heard);
+        cmp.close_before(tick_ns);
+        for f in heard.drain(..) {
+            cmp.replayed(tick_ns, f.id, &f.data);
+        }
+        if exit.is_some() {
+            break;
+        }
+        k += control_every;
+    }
+    cmp.close_before(u64::MAX);
+    Ok(ReplayReport {
+        scenario: rec.info.scenario.clone(),
+        mode: rec.info.mode,
+        tolerance: tol,
+        replayed_s,
+        inputs: next_input as u64,
+        divergence: cmp.divergence,
+        messages: cmp.messages,
+        truncated: rec.truncated.clone(),
+        skipped_frames: rec.skipped,
+        controller_exit: exit,
+    })
+}

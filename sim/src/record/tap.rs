@@ -1,0 +1,82 @@
+//! The recorder's ear on the bus: a node of its own that only listens, so it sees
+//! every frame the simulator's ECUs send and every frame they receive, in bus order.
+//! In SIL a memory-bus endpoint; in HIL a CAN socket on the interface with kernel
+//! receive timestamps (`SO_TIMESTAMPNS`), as candump takes them.
+
+use std::time::SystemTime;
+
+use embedded_can::Frame;
+use socketcan::{CanSocket, EmbeddedFrame, Socket, SocketOptions};
+
+/// One frame as the tap saw it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TapFrame {
+    pub id: u32,
+    pub extended: bool,
+    pub data: Vec<u8>,
+    /// The kernel's receive time (HIL).
+    pub kernel: Option<SystemTime>,
+}
+
+fn id_of(id: embedded_can::Id) -> (u32, bool) {
+    match id {
+        embedded_can::Id::Standard(s) => (u32::from(s.as_raw()), false),
+        embedded_can::Id::Extended(e) => (e.as_raw(), true),
+    }
+}
+
+/// Takes what arrived since the last call, never blocking.
+pub trait BusTap {
+    fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()>;
+}
+
+impl BusTap for firmware_bridge::can::membus::MemEndpoint {
+    fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()> {
+        use embedded_can::nb::Can;
+        while let Ok(f) = self.receive() {
+            let (id, extended) = id_of(f.id());
+            into.push(TapFrame {
+                id,
+                extended,
+                data: f.data().to_vec(),
+                kernel: None,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A listening CAN socket with kernel timestamps.
+#[derive(Debug)]
+pub struct SocketTap {
+    socket: CanSocket,
+}
+
+impl SocketTap {
+    pub fn open(iface: &str) -> std::io::Result<SocketTap> {
+        let socket = CanSocket::open(iface)?;
+        socket.set_nonblocking(true)?;
+        socket.set_recv_timestamp(true)?;
+        Ok(SocketTap { socket })
+    }
+}
+
+impl BusTap for SocketTap {
+    fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()> {
+        loop {
+            match self.socket.read_frame_with_timestamp() {
+                Ok((f, at)) => {
+                    let (id, extended) = id_of(EmbeddedFrame::id(&f));
+                    into.push(TapFrame {
+                        id,
+                        extended,
+                        data: EmbeddedFrame::data(&f).to_vec(),
+                        kernel: Some(at),
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(()),
+                Err(e) => return Err(e),
+            }
+        }
+    }
+}

@@ -1,0 +1,28 @@
+//! The recording's MCAP topics (the same names on the live view).
+
+/// `foxglove.LaserScan`, at the scanner's rate; the channel's metadata holds the
+/// frame's constant fields (angle_min, angle_increment, time_increment, scan_time,
+/// range_min, range_max) as exact f32 text.
+pub const LASER: &str = "/laser/scan";
+/// `foxglove.LocationFix`, one per GPS epoch.
+pub const FIX: &str = "/gps/fix";
+/// JSON `{"sentence": "$GPGGA,...*hh"}` (and `wall_unix_ns` in HIL), one per sentence
+/// as sent (without its CR LF).
+pub const NMEA: &str = "/gps/nmea";
+/// `foxglove.FrameTransform` world -> base_link (the rear axle), 50 Hz.
+pub const TF: &str = "/tf";
+/// `foxglove.PoseInFrame` of the rear axle in the world frame, 50 Hz.
+pub const POSE: &str = "/vehicle/pose";
+/// `foxglove.SceneUpdate` of the scenario's obstacles where they are.
+pub const OBSTACLES: &str = "/world/obstacles";
+/// `foxglove.SceneUpdate` with each path the controller planned (in-process
+/// controller only).
+pub const PLANS: &str = "/controller/plans";
+/// JSON `{"id", "extended", "data": hex, "direction": "rx"|"tx"}` (and
+/// `wall_unix_ns`, the kernel's receive time, in HIL), one per frame on the bus.
+pub const CAN_RAW: &str = "/can/raw";
+/// JSON `{"id", "message", "signals": {name: value}}` per golf_car.dbc, one per frame
+/// of a message the DBC defines.
+pub const CAN_DECODED: &str = "/can/decoded";
+/// JSON state of the in-process controller: mode, estimated pose, obstacles seen.
+pub const CONTROLLER_STATE: &str = "/controller/state";

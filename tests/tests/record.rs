@@ -1,0 +1,330 @@
+//! Recordings checked by readers that are not ours: the Python `mcap` package opens
+//! run.mcap of a SIL run and finds the Foxglove schemas and the message counts the
+//! verdict implies; `ugv-can decode` (can-dbc's CLI) reads bus.log; a SIL recording
+//! replays into the controller byte for byte; a simulator killed with SIGKILL leaves
+//! an MCAP readable up to about a second before the kill.
+
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use ugv_controller::config::FollowerKind;
+use ugv_e2e_tests::workspace_bin;
+use ugv_sim::Scenario;
+use ugv_sim::mission::controller_config;
+use ugv_sim::record::replay::{Recorded, Tolerance, replay};
+use ugv_sim::record::{BUS_LOG, MCAP_FILE, NMEA_FILE, topics};
+use ugv_sim::sil::{Hook, SilRun, run_sil_recorded};
+use ugv_sim::verdict::Verdict;
+
+fn python() -> String {
+    std::env::var("PYTHON").unwrap_or_else(|_| "python3".to_owned())
+}
+
+/// The Python `mcap` package's view of `path` (record_common/mcap_summary.py).
+fn mcap_summary(path: &Path) -> Value {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/record_common/mcap_summary.py");
+    let out = Command::new(python())
+        .arg(&script)
+        .arg(path)
+        .output()
+        .unwrap_or_else(|e| panic!("running {} (set PYTHON to choose another): {e}", python()));
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// The paper's scenario, recorded in SIL into `dir`, to its goal or for `limit` s.
+fn recorded_paper_run(dir: &Path, limit: Option<f64>) -> (Scenario, SilRun) {
+    let mut sc = Scenario::paper().unwrap();
+    if let Some(limit) = limit {
+        sc.sim.time_limit_s = limit;
+    }
+    let cfg = controller_config(&sc, FollowerKind::Optimal);
+    let run = run_sil_recorded(sc.clone(), &cfg, |_, _| Hook::Continue, Some(dir)).unwrap();
+    (sc, run)
+}
+
+fn count(summary: &Value, topic: &str) -> u64 {
+    summary["topics"][topic]["count"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("no topic {topic} in {summary}"))
+}
+
+#[test]
+fn python_mcap_finds_the_foxglove_schemas_and_the_counts_the_verdict_implies() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sc, run) = recorded_paper_run(dir.path(), None);
+    let verdict = Verdict::judge(
+        "sil",
+        &sc,
+        run.sim.report(run.outcome.clone()),
+        Some(&run.trace),
+    );
+    assert!(verdict.passed, "{:?}", verdict.failures);
+    let rec = run.recording.as_ref().expect("a recording");
+    assert_eq!(rec.error, None);
+    let s = mcap_summary(&dir.path().join(MCAP_FILE));
+    assert_eq!(s["complete"], true, "{s}");
+    assert_eq!(s["metadata"], serde_json::json!(["ugv-hil run"]));
+    assert_eq!(s["attachments"], serde_json::json!(["controller.toml"]));
+    for (topic, schema) in [
+        (topics::LASER, "foxglove.LaserScan"),
+        (topics::FIX, "foxglove.LocationFix"),
+        (topics::TF, "foxglove.FrameTransform"),
+        (topics::POSE, "foxglove.PoseInFrame"),
+        (topics::OBSTACLES, "foxglove.SceneUpdate"),
+        (topics::PLANS, "foxglove.SceneUpdate"),
+    ] {
+        let t = &s["topics"][topic];
+        assert_eq!(t["schema"], schema, "{topic}: {t}");
+        assert_eq!(t["message_encoding"], "protobuf", "{topic}: {t}");
+    }
+    for topic in [
+        topics::CAN_RAW,
+        topics::CAN_DECODED,
+        topics::NMEA,
+        topics::CONTROLLER_STATE,
+    ] {
+        assert_eq!(
+            s["topics"][topic]["message_encoding"], "json",
+            "{topic}: {s}"
+        );
+    }
+    for (topic, t) in s["topics"].as_object().unwrap() {
+        assert_eq!(t["monotonic"], true, "{topic}: {t}");
+    }
+    // The run lasted T simulated seconds (its ticks 0..=T): the laser at 50 Hz and
+    // the GPS at its rate, each from t = 0.
+    let t_end = verdict.time();
+    let steps = (t_end * sc.sim.physics_hz).round() as u64;
+    let per = |hz: f64| (steps as f64 / (sc.sim.physics_hz / hz)).floor() as u64 + 1;
+    assert_eq!(sc.laser.spec().rate_hz, 50.0);
+    assert_eq!(count(&s, topics::LASER), per(50.0), "T = {t_end}");
+    assert_eq!(count(&s, topics::FIX), per(sc.gps.rate_hz), "T = {t_end}");
+    let epoch = sc.sim.epoch.unix_ns();
+    let last = s["topics"][topics::LASER]["last_ns"].as_u64().unwrap();
+    assert!(
+        last <= epoch + (t_end * 1e9) as u64 + 1
+            && last + 20_000_000 > epoch + (t_end * 1e9) as u64
+    );
+    // Every NMEA sentence as sent: one message per line of gps.nmea.
+    let nmea = std::fs::read_to_string(dir.path().join(NMEA_FILE)).unwrap();
+    assert_eq!(count(&s, topics::NMEA), nmea.lines().count() as u64);
+    assert!(nmea.lines().all(|l| l.starts_with('$')), "{}", &nmea[..200]);
+    // Every CAN frame: one raw message per line of bus.log, one decoded per frame of
+    // the DBC; the ECUs' reports are the frames the verdict says they sent; the
+    // controller's frames are what each ECU received minus the other ECU's reports,
+    // plus at most the last tick's (sent after the ECUs last read the bus).
+    let bus = std::fs::read_to_string(dir.path().join(BUS_LOG)).unwrap();
+    let frames = count(&s, topics::CAN_RAW);
+    assert_eq!(frames, bus.lines().count() as u64);
+    assert_eq!(count(&s, topics::CAN_DECODED), frames);
+    assert_eq!(frames, rec.can_frames);
+    let of = |id: &str| {
+        bus.lines()
+            .filter(|l| l.contains(&format!(" {id}#")))
+            .count() as u64
+    };
+    let (st, th) = (&verdict.report.steering_can, &verdict.report.throttle_can);
+    assert_eq!(of("101"), st.sent);
+    assert_eq!(of("111"), th.sent);
+    let controller = of("080") + of("100") + of("110");
+    assert_eq!(
+        controller + of("101") + of("111"),
+        frames,
+        "no other frames"
+    );
+    // The steering ECU heard the controller and the throttle ECU, except what was sent
+    // in the last step (at most one throttle report, a heartbeat and two commands).
+    let heard = st.e2e.accepted + st.e2e.rejected() + st.undecodable;
+    let seen = heard - th.sent;
+    assert!(
+        (seen..=seen + 4).contains(&controller),
+        "controller frames {controller}, the steering ECU heard {heard}"
+    );
+}
+
+#[test]
+fn ugv_can_decode_reads_bus_log_frame_for_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, run) = recorded_paper_run(dir.path(), Some(6.0));
+    let frames = run.recording.unwrap().can_frames;
+    let out = Command::new(workspace_bin("ugv-can").unwrap())
+        .args(["decode", "--json"])
+        .arg(dir.path().join(BUS_LOG))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{frames} frames, 0 rejected by E2E, 0 malformed lines"
+        )),
+        "{stderr}"
+    );
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len() as u64, frames);
+    assert!(
+        lines
+            .iter()
+            .all(|l| l["e2e"] == "ok" && l["interface"] == "vcan0")
+    );
+    // Simulated time on the scenario's epoch, rising.
+    let stamps: Vec<f64> = lines
+        .iter()
+        .map(|l| l["timestamp"].as_str().unwrap().parse().unwrap())
+        .collect();
+    let epoch = Scenario::paper().unwrap().sim.epoch.unix_s();
+    assert!((stamps[0] - epoch).abs() < 1e-6, "{} vs {epoch}", stamps[0]);
+    assert!(stamps.windows(2).all(|w| w[1] >= w[0]));
+}
+
+#[test]
+fn a_sil_recording_replays_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    recorded_paper_run(dir.path(), Some(6.0));
+    let rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
+    assert_eq!(rec.truncated, None);
+    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    assert_eq!(report.divergence, None, "{report:?}");
+    for name in ["CONTROLLER_HEARTBEAT", "STEERING_CMD", "THROTTLE_CMD"] {
+        let m = &report.messages[name];
+        assert!(m.recorded >= 300, "{name}: {m:?}");
+        assert_eq!((m.replayed, m.matched), (m.recorded, m.recorded), "{name}");
+    }
+    assert!(report.controller_exit.is_none(), "{report:?}");
+}
+
+#[test]
+fn a_changed_controller_diverges_and_the_replay_says_where() {
+    let dir = tempfile::tempdir().unwrap();
+    recorded_paper_run(dir.path(), Some(6.0));
+    let mut rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
+    // Another controller (a slower steering loop): its steering commands differ.
+    rec.config.follower.omega *= 0.5;
+    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    let d = report.divergence.expect("a divergence");
+    assert_eq!(d.message, "STEERING_CMD", "{d:?}");
+    assert!(d.signal.is_some() && d.recorded != d.replayed, "{d:?}");
+    assert!(d.time_s > 0.0, "{d:?}");
+}
+
+#[test]
+fn replay_refuses_what_is_not_a_recording_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("notes.mcap");
+    std::fs::write(&text, "not an mcap file at all").unwrap();
+    let e = Recorded::read(&text).unwrap_err().to_string();
+    assert!(
+        e.contains("notes.mcap") && e.contains("not an MCAP file"),
+        "{e}"
+    );
+    let missing = Recorded::read(&dir.path().join("absent.mcap"))
+        .unwrap_err()
+        .to_string();
+    assert!(missing.contains("absent.mcap"), "{missing}");
+    // A valid MCAP from someone else: no run metadata.
+    let foreign = dir.path().join("foreign.mcap");
+    {
+        let ctx = foxglove::Context::new();
+        let w = ctx
+            .mcap_writer()
+            .create_new_buffered_file(&foreign)
+            .unwrap();
+        ctx.channel_builder("/x")
+            .build::<foxglove::schemas::Log>()
+            .log(&foxglove::schemas::Log::default());
+        w.close().unwrap();
+    }
+    let e = Recorded::read(&foreign).unwrap_err().to_string();
+    assert!(e.contains("not a ugv-hil recording"), "{e}");
+    // The command line says the same, exit code 4, no panic.
+    let out = Command::new(workspace_bin("ugv-sim").unwrap())
+        .arg("replay")
+        .arg(&text)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(
+        stderr.contains("not an MCAP file") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+}
+
+/// SIGKILL ugv-sim in the middle of a SIL run paced at real time: the MCAP (without
+/// its summary) is readable by the Python reader up to about a second before the
+/// kill, and so are bus.log and gps.nmea; the replay reads it too, and says where
+/// it was cut.
+#[test]
+fn a_killed_simulator_leaves_its_recording_readable_to_a_second_before() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(workspace_bin("ugv-sim").unwrap())
+        .args(["run", "--sil", "--pace", "1", "--results"])
+        .arg(dir.path())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The run starts right after this line.
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    while !line.contains("scenario") {
+        line.clear();
+        assert!(
+            stderr.read_line(&mut line).unwrap() > 0,
+            "ugv-sim ended early"
+        );
+    }
+    let started = Instant::now();
+    std::thread::sleep(Duration::from_millis(3000));
+    child.kill().unwrap(); // SIGKILL
+    let ran = started.elapsed().as_secs_f64();
+    child.wait().unwrap();
+    let s = mcap_summary(&dir.path().join(MCAP_FILE));
+    assert_eq!(s["complete"], false, "{s}");
+    let epoch = Scenario::paper().unwrap().sim.epoch.unix_ns();
+    let last_s = |topic: &str| {
+        (s["topics"][topic]["last_ns"].as_u64().unwrap_or(epoch) - epoch) as f64 * 1e-9
+    };
+    // Paced at real time, the run had simulated about `ran` seconds at the kill.
+    for topic in [topics::LASER, topics::CAN_RAW, topics::NMEA, topics::TF] {
+        let last = last_s(topic);
+        assert!(
+            last >= ran - 1.5 && last <= ran + 0.1,
+            "{topic}: {last} s of {ran} s"
+        );
+    }
+    assert!(count(&s, topics::LASER) as f64 >= (ran - 1.5) * 50.0);
+    let bus = std::fs::read_to_string(dir.path().join(BUS_LOG)).unwrap();
+    assert!(
+        bus.lines().count() as f64 >= (ran - 1.5) * 200.0,
+        "{} lines",
+        bus.lines().count()
+    );
+    let nmea = std::fs::read_to_string(dir.path().join(NMEA_FILE)).unwrap();
+    assert!(!nmea.is_empty());
+    let rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
+    assert!(rec.truncated.is_some());
+    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    assert!(report.replayed_s >= ran - 1.5, "{report:?}");
+    // Up to where the file was cut the commands are the recorded ones; past it the
+    // replay may have produced one tick the file lost.
+    if let Some(d) = &report.divergence {
+        assert!(d.time_s >= report.replayed_s - 0.02, "{d:?}");
+    }
+}
