@@ -23,6 +23,10 @@ use crate::perception::{Perception, PerceptionError, Pose2, Scan};
 
 /// Command period (STEERING_CMD, THROTTLE_CMD), seconds.
 pub const COMMAND_PERIOD: f64 = 0.01;
+
+/// A scan with fewer usable beams (returns or free space) than this fraction is
+/// blindness, not a scan: the laser-silence watchdog is not refreshed by it.
+pub const MIN_USABLE_BEAMS: f64 = 0.5;
 /// Heartbeat period, seconds.
 pub const HEARTBEAT_PERIOD: f64 = 0.02;
 /// FAULT_REPORT repetition while a fault lasts, seconds.
@@ -128,6 +132,8 @@ pub struct Controller {
     throttle: Option<(f64, ThrottleReport)>,
     ecu_fault: Option<String>,
     last_scan: Option<f64>,
+    /// The ECUs' reports against the commands (a stuck actuator, a driver's hands).
+    monitor: crate::monitor::ActuatorMonitor,
     obstacles: Vec<Circle>,
     stop_reason: Option<String>,
     next_heartbeat: f64,
@@ -162,6 +168,7 @@ impl Controller {
             throttle: None,
             ecu_fault: None,
             last_scan: None,
+            monitor: Default::default(),
             obstacles: Vec::new(),
             stop_reason: None,
             next_heartbeat: 0.0,
@@ -261,11 +268,17 @@ impl Controller {
                 if r.fault != SteeringReportFault::None && self.driving() {
                     self.ecu_fault = Some(format!("steering ECU reports {}", r.fault));
                 }
+                if self.driving() {
+                    self.monitor.on_steering(now, r);
+                }
                 self.steering = Some((now, *r));
             }
             GolfCarMessage::ThrottleReport(r) => {
                 if r.fault != ThrottleReportFault::None && self.driving() {
                     self.ecu_fault = Some(format!("throttle ECU reports {}", r.fault));
+                }
+                if self.driving() {
+                    self.monitor.on_throttle(now, r);
                 }
                 self.throttle = Some((now, *r));
             }
@@ -295,6 +308,15 @@ impl Controller {
     /// is blindness, and stops the car like silence does.
     pub fn on_scan(&mut self, now: f64, scan: &Scan<'_>) {
         if scan.validate().is_err() {
+            self.bad_scans += 1;
+            return;
+        }
+        // A scan whose beams are mostly dropouts (a NaN or zero-range storm) shows
+        // nothing: it does not refresh the watchdog either.
+        let usable = (0..scan.ranges.len())
+            .filter(|&i| scan.beam(i) != crate::perception::Beam::Dropout)
+            .count();
+        if (usable as f64) < MIN_USABLE_BEAMS * scan.ranges.len() as f64 {
             self.bad_scans += 1;
             return;
         }
@@ -336,6 +358,15 @@ impl Controller {
 
     fn fix_ok(&self, now: f64) -> Result<(), (FaultReportCode, String)> {
         let s = &self.cfg.safety;
+        if let Some(jump) = &self.loc.jump {
+            return Err((
+                FaultReportCode::GpsDegraded,
+                format!(
+                    "the GPS position jumped {:.2} m from the dead-reckoned one at {:.2} s",
+                    jump.metres, jump.at
+                ),
+            ));
+        }
         match self.loc.last_fix {
             None => Err((FaultReportCode::GpsLost, "no GPS fix".to_owned())),
             Some((t, _)) if now - t > s.gps_timeout() => Err((
@@ -382,6 +413,9 @@ impl Controller {
         }
         if let Some(f) = &self.ecu_fault {
             return Err((FaultReportCode::ActuatorFault, f.clone()));
+        }
+        if let Some(f) = self.monitor.finding() {
+            return Err((FaultReportCode::ActuatorFault, f.reason.clone()));
         }
         Ok(())
     }
@@ -565,6 +599,7 @@ impl Controller {
             self.next_fault = now + FAULT_PERIOD;
         }
         self.watch.commanded(now, &out, hold);
+        self.monitor.commanded(now, &out);
         out
     }
 }

@@ -9,6 +9,7 @@ pub mod core;
 pub mod guidance;
 pub mod intrusion;
 pub mod localisation;
+pub mod monitor;
 pub mod perception;
 pub mod planner;
 pub mod route;

@@ -12,6 +12,24 @@ use crate::config::ControllerConfig;
 /// Course over ground is trusted for heading above this speed, m/s.
 const COG_MIN_SPEED: f64 = 0.8;
 
+/// A fix refused for landing too far from the dead-reckoned pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Jump {
+    pub at: f64,
+    pub metres: f64,
+}
+
+/// The farthest a fix may land from the dead-reckoned pose, metres: several times
+/// what the fix kind's noise and a second of dead reckoning explain (RTK fixed: 1-2
+/// cm; float: decimetres), so only a jump or multipath exceeds it.
+fn jump_gate(quality: FixQuality) -> f64 {
+    match quality {
+        FixQuality::RtkFixed => 0.5,
+        FixQuality::RtkFloat => 2.0,
+        _ => 10.0,
+    }
+}
+
 /// The estimated state of the rear axle in the world frame.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pose {
@@ -42,6 +60,11 @@ pub struct Localiser {
     fixed_at: f64,
     /// Time and quality of the last fix with a position.
     pub last_fix: Option<(f64, FixQuality)>,
+    /// The first fix that landed too far from the dead-reckoned pose (a jump,
+    /// multipath): refused, and kept for the safety check.
+    pub jump: Option<Jump>,
+    /// The fix kind of the fix the pose was last taken from.
+    pose_quality: Option<FixQuality>,
     speed: f64,
     phi: f64,
 }
@@ -60,6 +83,8 @@ impl Localiser {
             horizon: cfg.safety.gps_timeout(),
             fixed_at: 0.0,
             last_fix: None,
+            jump: None,
+            pose_quality: None,
             speed: 0.0,
             phi: 0.0,
         })
@@ -124,13 +149,25 @@ impl Localiser {
         } = enu;
         let (c, s) = (theta.cos(), theta.sin());
         let (ax, ay) = self.antenna;
-        self.pose = Some(Pose {
+        let pose = Pose {
             x: east_m - (ax * c - ay * s),
             y: north_m - (ax * s + ay * c),
             theta,
             v: self.speed,
             phi: self.phi,
-        });
+        };
+        if let Some(p) = previous {
+            let metres = (pose.x - p.x).hypot(pose.y - p.y);
+            // A change of fix kind moves the position by the worse kind's error
+            // (float converging to fixed): the wider gate of the two holds.
+            let gate = jump_gate(quality).max(self.pose_quality.map_or(0.0, jump_gate));
+            if metres > gate {
+                self.jump.get_or_insert(Jump { at: now, metres });
+                return;
+            }
+        }
+        self.pose = Some(pose);
+        self.pose_quality = Some(quality);
         self.at = now;
         self.fixed_at = now;
     }

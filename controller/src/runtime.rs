@@ -206,6 +206,9 @@ pub struct InputStats {
     pub gps_errors: u64,
     /// Laser frames refused at the port (validation).
     pub laser_frames_refused: u64,
+    /// Laser frames that repeated the previous one (sequence and stamp): a frozen
+    /// scanner, skipped like silence.
+    pub laser_frames_repeated: u64,
     /// The last such error, for the log.
     pub last_error: Option<String>,
 }
@@ -228,6 +231,8 @@ pub struct Runtime<G, L, B> {
     can: CanPort<B>,
     gps_lost: bool,
     laser_lost: bool,
+    /// Sequence and stamp of the last laser frame taken.
+    last_scan_id: Option<(u64, u64)>,
     closing: Option<Closing>,
     next_heartbeat: f64,
     trace: Option<TraceWriter>,
@@ -247,6 +252,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             can,
             gps_lost: false,
             laser_lost: false,
+            last_scan_id: None,
             closing: None,
             next_heartbeat: 0.0,
             trace: None,
@@ -362,7 +368,17 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         if !self.laser_lost {
             for _ in 0..MAX_FRAMES_PER_TICK {
                 match self.laser.try_recv() {
-                    Ok(Some(frame)) => self.ctl.on_scan(now, &scan_of(&frame, now)),
+                    // A frozen scanner sends its last scan again: the same sequence
+                    // and acquisition time. Only a new scan shows that it sees.
+                    Ok(Some(frame))
+                        if self.last_scan_id == Some((frame.sequence, frame.stamp_ns)) =>
+                    {
+                        self.stats.laser_frames_repeated += 1;
+                    }
+                    Ok(Some(frame)) => {
+                        self.last_scan_id = Some((frame.sequence, frame.stamp_ns));
+                        self.ctl.on_scan(now, &scan_of(&frame, now));
+                    }
                     Ok(None) => break,
                     Err(e @ InputError::Malformed(_)) => {
                         self.stats.laser_frames_refused += 1;

@@ -104,17 +104,28 @@ where
 
     /// Send any message of the network.
     pub fn send_message(&mut self, message: &GolfCarMessage) -> Result<(), BridgeError> {
+        let (id, sealed) = self.seal_message(message)?;
+        self.send_payload(id, &sealed)
+    }
+
+    /// Encode `message` and protect it with its ID's next counter and the CRC, without
+    /// sending it (fault injection alters the payload, or leaves a counter out).
+    pub fn seal_message(&mut self, message: &GolfCarMessage) -> Result<(u16, Payload), BridgeError> {
         let id = message.id();
         let data = message.encode().map_err(|source| BridgeError::Encode {
             message: message.name(),
             source,
         })?;
-        let sealed = self.tx.seal(id, data);
-        self.send_payload(id, &sealed)
+        Ok((id, self.tx.seal(id, data)))
     }
 
     /// Send a payload exactly as given (no E2E added): for gateways and fault injection.
     pub fn send_payload(&mut self, id: u16, data: &Payload) -> Result<(), BridgeError> {
+        self.send_bytes(id, data)
+    }
+
+    /// Send 0 to 8 bytes exactly as given (a wrong DLC, for fault injection).
+    pub fn send_bytes(&mut self, id: u16, data: &[u8]) -> Result<(), BridgeError> {
         let sid = StandardId::new(id).ok_or(BridgeError::BadId { id })?;
         let frame = B::Frame::new(sid, data).ok_or(BridgeError::BadId { id })?;
         let started = Instant::now();

@@ -15,6 +15,7 @@ use firmware_bridge::{BridgeError, CanPort, Received};
 use golf_car_can::GolfCarMessage;
 use socketcan::CanSocket;
 
+use crate::faults::ProcessFault;
 use crate::devices::cola_driver::{ColaDriverStats, ColaDriverThread};
 use crate::devices::gps::{GpsError, GpsPort};
 use crate::devices::laser::LaserProfile;
@@ -353,12 +354,9 @@ impl ControllerProcess {
         if let Ok(Some(status)) = self.child.try_wait() {
             return Some(status);
         }
-        if let Ok(pid) = i32::try_from(self.child.id()) {
-            let _ = nix::sys::signal::kill(
-                nix::unistd::Pid::from_raw(pid),
-                nix::sys::signal::Signal::SIGINT,
-            );
-        }
+        // A process the fault plan stopped must run again to act on SIGINT.
+        self.signal(nix::sys::signal::Signal::SIGCONT);
+        self.signal(nix::sys::signal::Signal::SIGINT);
         let deadline = Instant::now() + grace;
         while Instant::now() < deadline {
             if let Ok(Some(status)) = self.child.try_wait() {
@@ -368,6 +366,13 @@ impl ControllerProcess {
         }
         let _ = self.child.kill();
         self.child.wait().ok()
+    }
+
+    /// Send `signal` to the controller's process (gone already: nothing to do).
+    pub fn signal(&self, signal: nix::sys::signal::Signal) {
+        if let Ok(pid) = i32::try_from(self.child.id()) {
+            let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), signal);
+        }
     }
 }
 
@@ -425,6 +430,7 @@ pub fn run_hil(
     let mut clock = WallClock::new(sim.dt());
     let started = clock.start_monotonic_ns();
     let every = ((status_every / sim.dt()).round() as u64).max(1);
+    let mut process = ProcessFault::Running;
     loop {
         if stop.load(Ordering::Relaxed) {
             return Ok((
@@ -456,6 +462,23 @@ pub fn run_hil(
         }
         if let Some(o) = outcome {
             return Ok((o, started));
+        }
+        let wanted = sim.process_fault();
+        if wanted != process {
+            let Some(c) = controller.as_deref_mut() else {
+                return Err(HilError::Setup(
+                    "the fault plan kills or stops the controller's process, which needs a \
+                     controller started by ugv-sim (--controller)"
+                        .to_owned(),
+                ));
+            };
+            use nix::sys::signal::Signal;
+            c.signal(match wanted {
+                ProcessFault::Killed => Signal::SIGKILL,
+                ProcessFault::Stopped => Signal::SIGSTOP,
+                ProcessFault::Running => Signal::SIGCONT,
+            });
+            process = wanted;
         }
         if k % 20 == 0 {
             if let Some(c) = controller.as_deref_mut() {

@@ -10,6 +10,7 @@ pub mod isolate;
 pub use firmware_bridge::clock;
 pub mod devices;
 pub mod ecu;
+pub mod faults;
 pub mod mission;
 pub mod plot;
 pub mod record;

@@ -201,6 +201,10 @@ struct RunArgs {
     /// (needs root). Look in with `sudo ip netns exec ugv-RUN_ID candump IFACE`.
     #[arg(long)]
     isolate: bool,
+    /// A fault plan (`[[faults]]` and `[expect]`, as in a scenario) added to the
+    /// scenario's own; see the README's fault injection.
+    #[arg(long, value_name = "FILE")]
+    faults: Option<PathBuf>,
     /// Do not record the run (by default run.mcap, bus.log and gps.nmea go into the
     /// results directory; see the README).
     #[arg(long)]
@@ -396,6 +400,12 @@ fn exit_code(outcome: &Outcome) -> u8 {
 
 fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     let mut sc = Scenario::load_or_paper(args.scenario.as_ref())?;
+    if let Some(file) = &args.faults {
+        let plan = ugv_sim::faults::plan::PlanFile::load(file)?;
+        sc = sc
+            .with_fault_plan(plan)
+            .map_err(|e| anyhow::anyhow!("{}: with the fault plan: {e}", file.display()))?;
+    }
     if let Some(iface) = &args.can {
         sc.can.interface = iface.clone();
     }

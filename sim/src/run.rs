@@ -12,6 +12,7 @@ use crate::devices::laser::{LaserDevice, LaserDeviceError};
 use crate::devices::map::EcuDevice;
 use crate::ecu::EcuKind;
 use crate::ecu::station::Station;
+use crate::faults::{FaultRecord, Injector, Node, ProcessFault};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 use crate::world::World;
@@ -26,6 +27,8 @@ pub enum SimError {
     Gps(#[from] GpsError),
     #[error("laser: {0}")]
     Laser(#[from] LaserDeviceError),
+    #[error("fault plan: {0}")]
+    Faults(#[from] ugv_fields::FieldError),
 }
 
 /// What the sensors produced in one step (the runner puts it on the wires).
@@ -94,8 +97,9 @@ pub struct NodeStats {
     pub bus_errors: u64,
     pub sent: u64,
     /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
-    /// fault report, second sender (the simulated ECU's; zero for a physical one).
-    pub safe_state_trips: [u64; 5],
+    /// fault report, second sender, its own hardware fault (the simulated ECU's; zero
+    /// for a physical one).
+    pub safe_state_trips: [u64; 6],
     /// Reports received from the physical ECU (absent when the ECU is simulated).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub physical_reports: Option<u64>,
@@ -137,6 +141,8 @@ pub struct Sim<B> {
     pub trajectory: Vec<(f64, VehicleState)>,
     /// Since the controller went away: the run goes on until the car is safe.
     wind_down: Option<WindDown>,
+    /// The scenario's fault plan, applied at the wires.
+    faults: Injector,
 }
 
 /// How long the run goes on after the controller went away, waiting for both ECUs'
@@ -213,6 +219,7 @@ impl<B: Can> Sim<B> {
             outputs: SensorOutput::default(),
             trajectory: vec![(0.0, vehicle)],
             wind_down: None,
+            faults: Injector::new(Vec::new(), 0),
             scenario,
         }
     }
@@ -222,7 +229,16 @@ impl<B: Can> Sim<B> {
     pub fn with_sensors(mut self) -> Result<Sim<B>, SimError> {
         self.gps = Some(GpsDevice::from_scenario(&self.scenario)?);
         self.laser = Some(LaserDevice::from_scenario(&self.scenario)?);
+        self.faults = Injector::new(
+            crate::faults::plan::typed_plan(&self.scenario.faults)?,
+            self.scenario.sim.seed,
+        );
         Ok(self)
+    }
+
+    /// What the fault plan makes the controller's process do now.
+    pub fn process_fault(&self) -> ProcessFault {
+        self.faults.process(self.time())
     }
 
     /// What the sensors produced in the last step.
@@ -252,8 +268,17 @@ impl<B: Can> Sim<B> {
         let now = self.tick as f64 * self.dt;
         self.tick += 1;
         self.lateness.push(late);
-        self.steering.drain(now);
-        self.throttle.drain(now);
+        let faults = &mut self.faults;
+        faults.update(now, self.vehicle.odometer);
+        self.steering
+            .drain_with(now, &mut |m| faults.on_ecu_rx(now, m, true));
+        self.throttle
+            .drain_with(now, &mut |m| faults.on_ecu_rx(now, m, false));
+        if !faults.is_empty() {
+            let actuators = faults.actuators(now);
+            self.steering.set_faults(now, &actuators);
+            self.throttle.set_faults(now, &actuators);
+        }
         self.steering.step(now, self.dt);
         self.throttle.step(now, self.dt);
         let (phi, rate) = self.steering.actuator();
@@ -265,16 +290,29 @@ impl<B: Can> Sim<B> {
                 .step(self.scenario.vehicle.wheelbase, v, phi, self.dt);
             self.world.set_time(now);
         }
-        self.steering.send_due(now, wall)?;
-        self.throttle.send_due(now, wall)?;
+        let faults = &mut self.faults;
+        self.steering
+            .send_due_with(now, wall, &mut |_| faults.on_ecu_tx(now, Node::Steering))?;
+        self.throttle
+            .send_due_with(now, wall, &mut |_| faults.on_ecu_tx(now, Node::Throttle))?;
+        if let Some((id, n)) = faults.babble(now, self.dt) {
+            for _ in 0..n {
+                self.steering.send_raw(id, &[0xff; 8])?;
+            }
+        }
         if let Some(gps) = &mut self.gps {
-            self.outputs.gps = gps.poll(now, &self.vehicle)?;
+            if !faults.is_empty() {
+                let (fix, (east, north)) = faults.gps_receiver(now);
+                gps.set_fix_override(fix);
+                gps.set_position_offset(east, north);
+            }
+            self.outputs.gps = faults.gps(now, gps.poll(now, &self.vehicle)?);
         }
         if let Some(laser) = &mut self.laser {
             if now + 1e-9 >= self.next_scan {
                 let v = &self.vehicle;
-                self.outputs.laser =
-                    Some(Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta)));
+                let scan = Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta));
+                self.outputs.laser = faults.laser(now, Some(scan));
                 self.next_scan =
                     firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());
             }
@@ -404,6 +442,12 @@ impl<B: Can> Sim<B> {
     pub fn tick_lateness(&self) -> Jitter {
         Jitter::of(self.lateness.clone())
     }
+
+    /// The injected faults, timed against the ECUs' safe states.
+    pub fn fault_records(&self) -> Vec<FaultRecord> {
+        self.faults
+            .report(self.steering.safe_entries(), self.throttle.safe_entries())
+    }
 }
 
 /// The result of a run, as JSON for people and CI.
@@ -428,6 +472,10 @@ pub struct RunReport {
     /// After the controller went away: each ECU's time to its safe state.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safe_state: Option<SafeStateReport>,
+    /// Every injected fault: when, how much, what detected it, how fast each ECU
+    /// reached its safe state.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<FaultRecord>,
 }
 
 impl<B: Can> Sim<B> {
@@ -448,6 +496,7 @@ impl<B: Can> Sim<B> {
             report_jitter: self.report_jitter(),
             tick_lateness: self.tick_lateness(),
             safe_state: self.safe_state(),
+            faults: self.fault_records(),
         }
     }
 }

@@ -62,6 +62,8 @@ pub struct Goal {
     pub heading_deg: Option<f64>,
     /// Distance of the rear-axle reference point from the goal that counts as reached.
     pub tolerance: f64,
+    /// Speed limit on the last leg (into the goal), m/s.
+    pub speed_limit: Option<f64>,
 }
 
 impl Default for Goal {
@@ -71,6 +73,7 @@ impl Default for Goal {
             y: 15.0,
             heading_deg: None,
             tolerance: 1.0,
+            speed_limit: None,
         }
     }
 }
@@ -287,6 +290,10 @@ pub struct Scenario {
     pub datum: Datum,
     pub start: Pose,
     pub goal: Goal,
+    /// Points to pass in order before the goal (`[[waypoints]]`): with them the
+    /// mission is a route, start, waypoints, goal; without, the one leg start-goal.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub waypoints: Vec<ugv_controller::route::Waypoint>,
     pub obstacles: Vec<Obstacle>,
     pub vehicle: VehicleConfig,
     pub steering: SteeringConfig,
@@ -298,6 +305,11 @@ pub struct Scenario {
     pub success: SuccessCriteria,
     /// Which devices are simulated and which physical (all simulated by default).
     pub devices: crate::devices::map::DeviceMap,
+    /// Faults injected during the run (`[[faults]]`), in the order written.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<crate::faults::FaultSpec>,
+    /// What must follow the faults.
+    pub expect: crate::faults::Expectations,
 }
 
 impl Default for Scenario {
@@ -312,6 +324,7 @@ impl Default for Scenario {
                 heading_deg: 45.0,
             },
             goal: Goal::default(),
+            waypoints: Vec::new(),
             obstacles: vec![Obstacle::Circle {
                 x: 19.0,
                 y: 8.0,
@@ -327,6 +340,8 @@ impl Default for Scenario {
             sim: SimConfig::default(),
             success: SuccessCriteria::default(),
             devices: Default::default(),
+            faults: Vec::new(),
+            expect: Default::default(),
         }
     }
 }
@@ -400,6 +415,20 @@ impl Scenario {
         Ok(scenario)
     }
 
+    /// The scenario with the faults of `plan` added after its own (and its `[expect]`
+    /// when the plan has one), validated again.
+    pub fn with_fault_plan(
+        mut self,
+        plan: crate::faults::plan::PlanFile,
+    ) -> Result<Scenario, FieldError> {
+        self.faults.extend(plan.faults);
+        if let Some(expect) = plan.expect {
+            self.expect = expect;
+        }
+        self.validate()?;
+        Ok(self)
+    }
+
     /// Read a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
         let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
@@ -429,6 +458,7 @@ impl Scenario {
     /// start and goal usable.
     pub(crate) fn validate(&self) -> Result<(), FieldError> {
         let at = |keys: &[&'static str]| FieldPath::of(keys);
+        crate::faults::plan::validate_plan(&self.faults, &self.expect)?;
         let d = &self.datum;
         within(
             &at(&["datum", "latitude"]),
@@ -460,14 +490,23 @@ impl Scenario {
             angle_deg(&at(&["goal", "heading_deg"]), h)?;
         }
         positive_up_to(&at(&["goal", "tolerance"]), self.goal.tolerance, 50.0, "m")?;
-        // The controller's own rule (its mission.goal_x): a mission needs a way to go.
-        let distance = (self.goal.x - self.start.x).hypot(self.goal.y - self.start.y);
-        if distance < 1.0 {
-            return Err(FieldError::new(
-                at(&["goal"]),
-                format!("the goal must be at least 1 m from the start, is {distance:.2} m"),
-            ));
+        if let Some(v) = self.goal.speed_limit {
+            positive_up_to(
+                &at(&["goal", "speed_limit"]),
+                v,
+                self.vehicle.max_speed,
+                "m/s (vehicle.max_speed)",
+            )?;
         }
+        // The controller's own rule (its mission.waypoints): every leg has a length.
+        ugv_controller::route::check_waypoints(
+            &at(&["waypoints"]),
+            &self.waypoints,
+            (self.start.x, self.start.y),
+            (self.goal.x, self.goal.y),
+            &at(&["goal"]),
+            self.vehicle.max_speed,
+        )?;
 
         let v = &self.vehicle;
         let vp = |k: &'static str| at(&["vehicle", k]);

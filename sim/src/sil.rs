@@ -12,6 +12,7 @@ use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
 use ugv_controller::trace::Trace;
 
 use crate::record::{RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo};
+use crate::faults::ProcessFault;
 use crate::run::{Outcome, Sim, SimError};
 use crate::scenario::Scenario;
 
@@ -132,9 +133,12 @@ pub fn run_sil_recorded(
         }
         // Once the loop has ended the controller is gone, as its process would be.
         if !gone && k % control_every == 0 {
-            if hook(now, &mut rt) == Hook::Kill {
+            let process = sim.process_fault();
+            if process == ProcessFault::Killed || hook(now, &mut rt) == Hook::Kill {
                 gone = true;
                 sim.controller_gone("the controller was killed".to_owned());
+            } else if process == ProcessFault::Stopped {
+                // SIGSTOP: the process neither reads nor sends until SIGCONT.
             } else if let Some(e) = rt.step(now) {
                 gone = true;
                 sim.controller_gone(format!("the controller's loop ended ({})", e.describe()));

@@ -109,9 +109,18 @@ impl Verdict {
                 scenario.success.min_clearance
             ));
         }
-        if let Outcome::Stopped { reason, .. } = &report.outcome {
+        // A stop the fault plan caused (the controller killed) is what it tests.
+        let planned_stop = !scenario.success.reach_goal
+            && report
+                .faults
+                .iter()
+                .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill);
+        if let Outcome::Stopped { reason, .. } = &report.outcome
+            && !planned_stop
+        {
             failures.push(format!("stopped: {reason}"));
         }
+        failures.extend(crate::faults::inject::unmet(&scenario.expect, &report.faults));
         if let Some(s) = &report.safe_state {
             for (name, e) in [("steering", &s.steering), ("throttle", &s.throttle)] {
                 if !e.within_bound {

@@ -134,6 +134,10 @@ pub struct GpsDevice {
     noise: ErrorModel,
     next_index: u64,
     missed: u64,
+    /// Injected faults (`[[faults]]`): the fix kind forced, and an offset of the
+    /// reported position (a jump, multipath), east and north metres.
+    fix_override: Option<FixKind>,
+    offset_m: (f64, f64),
 }
 
 impl GpsDevice {
@@ -163,6 +167,8 @@ impl GpsDevice {
             noise: ErrorModel::new(sim.seed),
             next_index: 0,
             missed: 0,
+            fix_override: None,
+            offset_m: (0.0, 0.0),
         })
     }
 
@@ -198,6 +204,16 @@ impl GpsDevice {
     /// Sim time of the next epoch to be produced.
     pub fn next_epoch_time(&self) -> f64 {
         self.epoch_time(self.next_index)
+    }
+
+    /// Force the fix kind the receiver reports (`None`: the configured one again).
+    pub fn set_fix_override(&mut self, fix: Option<FixKind>) {
+        self.fix_override = fix;
+    }
+
+    /// Offset the reported position by `east_m`, `north_m` (zero: none).
+    pub fn set_position_offset(&mut self, east_m: f64, north_m: f64) {
+        self.offset_m = (east_m, north_m);
     }
 
     /// Epochs skipped because `poll` was called too rarely.
@@ -262,7 +278,7 @@ impl GpsDevice {
     fn epoch(&mut self, index: u64, t: f64, s: &VehicleState) -> Result<GpsEpoch, GpsError> {
         let c = &self.config;
         let truth = self.antenna(s);
-        let fix_kind = c.fix_at(t);
+        let fix_kind = self.fix_override.unwrap_or_else(|| c.fix_at(t));
         let model = c.model(fix_kind);
         let error = self.noise.epoch(t, model.as_ref(), c.heading_sigma_deg);
         let fix = match model {
@@ -273,8 +289,8 @@ impl GpsDevice {
             Some(m) => {
                 let up = c.antenna_z + error.up_m;
                 let mut g = self.frame.to_geodetic(Enu {
-                    east_m: truth.enu.east_m + error.east_m,
-                    north_m: truth.enu.north_m + error.north_m,
+                    east_m: truth.enu.east_m + error.east_m + self.offset_m.0,
+                    north_m: truth.enu.north_m + error.north_m + self.offset_m.1,
                     up_m: up,
                 });
                 g.height_m = self.datum_altitude_m + up;

@@ -132,6 +132,23 @@ impl EcuNode {
         self.safety().on_second_sender(now);
     }
 
+    /// The injected actuator faults in force from `now` on.
+    pub fn set_faults(&mut self, now: f64, faults: &crate::faults::ActuatorFaults) {
+        let code = match &mut self.ecu {
+            Ecu::Steering(e) => {
+                e.faults = faults.steering;
+                faults.steering_code
+            }
+            Ecu::Throttle(e) => {
+                e.faults = faults.throttle;
+                faults.throttle_code
+            }
+        };
+        if self.safety_ref().actuator_fault() != code {
+            self.safety().set_actuator_fault(now, code);
+        }
+    }
+
     /// Move the actuator by `dt` ending at `now`.
     pub fn step(&mut self, now: f64, dt: f64) {
         match &mut self.ecu {
@@ -167,7 +184,16 @@ impl EcuNode {
                 self.next_report = firmware_bridge::clock::next_slot(self.next_report, now, period);
             }
         }
-        let own = self.safety_ref().fault().and_then(|c| c.own_fault_code());
+        let own = match self.safety_ref().fault() {
+            Some(safety::Cause::Actuator) => {
+                self.safety_ref().actuator_fault().map(|c| match c {
+                    crate::faults::EcuFaultCode::Overcurrent => FaultReportCode::ActuatorOvercurrent,
+                    crate::faults::EcuFaultCode::Sensor => FaultReportCode::ActuatorSensor,
+                    crate::faults::EcuFaultCode::Internal => FaultReportCode::ActuatorFault,
+                })
+            }
+            cause => cause.and_then(|c| c.own_fault_code()),
+        };
         match own {
             Some(code) if now + 1e-9 >= self.next_fault => {
                 let detail = match (code, self.second_sender, &self.ecu) {

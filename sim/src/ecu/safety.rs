@@ -17,6 +17,8 @@ pub enum Cause {
     FaultReport,
     /// A second sender on a counter stream the ECU receives.
     SecondSender,
+    /// The ECU's own hardware fault (overcurrent, sensor, internal; `Safety::actuator`).
+    Actuator,
 }
 
 impl Cause {
@@ -27,7 +29,8 @@ impl Cause {
             Cause::CommandTimeout => Some(FaultReportCode::CommandTimeout),
             Cause::HeartbeatTimeout => Some(FaultReportCode::HeartbeatTimeout),
             Cause::SecondSender => Some(FaultReportCode::SecondSender),
-            Cause::Estop | Cause::FaultReport => None,
+            // The code depends on the hardware fault: `EcuNode::due` picks it.
+            Cause::Estop | Cause::FaultReport | Cause::Actuator => None,
         }
     }
 }
@@ -53,8 +56,10 @@ pub struct Safety {
     enable_bit: bool,
     enabled: bool,
     latched: Option<Cause>,
+    /// The ECU's own hardware fault while it lasts.
+    actuator: Option<crate::faults::EcuFaultCode>,
     /// Times the safe state was entered, by cause order above.
-    pub trips: [u64; 5],
+    pub trips: [u64; 6],
 }
 
 impl Safety {
@@ -68,7 +73,8 @@ impl Safety {
             enable_bit: false,
             enabled: false,
             latched: None,
-            trips: [0; 5],
+            actuator: None,
+            trips: [0; 6],
         }
     }
 
@@ -102,6 +108,17 @@ impl Safety {
         self.update(now);
     }
 
+    /// The ECU's own hardware fault starts (`Some`) or clears (`None`).
+    pub fn set_actuator_fault(&mut self, now: f64, code: Option<crate::faults::EcuFaultCode>) {
+        self.actuator = code;
+        self.update(now);
+    }
+
+    /// The hardware fault in force, if any.
+    pub fn actuator_fault(&self) -> Option<crate::faults::EcuFaultCode> {
+        self.actuator
+    }
+
     fn fresh(last: Option<f64>, now: f64, timeout: f64) -> bool {
         last.is_some_and(|t| now - t <= timeout)
     }
@@ -132,6 +149,7 @@ impl Safety {
             Cause::SecondSender => {
                 Self::fresh(self.last_second_sender, now, self.timing.fault_clear)
             }
+            Cause::Actuator => self.actuator.is_some(),
             Cause::HeartbeatTimeout => driven && !heartbeat_fresh,
             Cause::CommandTimeout => {
                 driven && !Self::fresh(self.last_command, now, self.timing.command_timeout)
@@ -143,8 +161,9 @@ impl Safety {
     /// holds, so the report says why the ECU tripped), clear it when no condition is
     /// left, disable when the controller leaves auto.
     pub fn update(&mut self, now: f64) {
-        const ORDER: [Cause; 5] = [
+        const ORDER: [Cause; 6] = [
             Cause::SecondSender,
+            Cause::Actuator,
             Cause::Estop,
             Cause::FaultReport,
             Cause::HeartbeatTimeout,

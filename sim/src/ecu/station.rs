@@ -2,15 +2,17 @@
 //! a physical ECU whose reports move the simulated vehicle; and the standalone ECU, a
 //! simulated ECU alone on any interface as a stand-in for the hardware on a bench.
 
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use embedded_can::nb::Can;
 use firmware_bridge::clock::Clock;
 use firmware_bridge::{BridgeError, CanPort, Received};
-use golf_car_can::GolfCarMessage;
+use golf_car_can::{GolfCarMessage, Payload};
 
 use super::{Ecu, EcuKind, EcuNode};
 use crate::devices::map::EcuDevice;
+use crate::faults::{CounterMode, RxFault, TxFault};
 use crate::run::NodeStats;
 use crate::scenario::Scenario;
 
@@ -67,6 +69,14 @@ pub struct Station<B> {
     /// had been enabled: when the bus learnt of its safe state.
     safe_since: Option<f64>,
     was_enabled: bool,
+    /// Each entry into the safe state: simulated time and the ECU's fault then.
+    safe_entries: Vec<(f64, Option<crate::ecu::safety::Cause>)>,
+    /// Frames held back by an injected delay: due time, ID, bytes (sending), or the
+    /// message (receiving).
+    delayed_tx: VecDeque<(f64, u16, Vec<u8>)>,
+    delayed_rx: VecDeque<(f64, GolfCarMessage)>,
+    /// The last payload sent per ID (an injected repeated counter sends it again).
+    last_sent: HashMap<u16, Payload>,
 }
 
 impl<B: Can> Station<B> {
@@ -83,22 +93,52 @@ impl<B: Can> Station<B> {
             report_times: Vec::new(),
             safe_since: None,
             was_enabled: false,
+            safe_entries: Vec::new(),
+            delayed_tx: VecDeque::new(),
+            delayed_rx: VecDeque::new(),
+            last_sent: HashMap::new(),
         }
     }
 
     /// Take every frame waiting on the bus. A simulated ECU whose receiver sees a
     /// second sender on any counter stream goes to its safe state.
     pub fn drain(&mut self, now: f64) {
+        self.drain_with(now, &mut |_| RxFault::Pass);
+    }
+
+    /// [`Self::drain`] with `rx` deciding, frame by frame, what an injected fault does
+    /// to what the ECU receives.
+    pub fn drain_with(&mut self, now: f64, rx: &mut dyn FnMut(&GolfCarMessage) -> RxFault) {
+        while self.delayed_rx.front().is_some_and(|d| d.0 <= now + 1e-9) {
+            if let Some((_, m)) = self.delayed_rx.pop_front() {
+                self.handle(now, &m);
+            }
+        }
         while let Some(r) = self.port.try_recv() {
             if let Received::Message(m) = r {
-                match &mut self.twin {
-                    Twin::Simulated(node) => node.handle(now, &m),
-                    Twin::Physical(reported) => reported.handle(self.kind, &m),
+                match rx(&m) {
+                    RxFault::Pass => self.handle(now, &m),
+                    RxFault::Drop => {}
+                    RxFault::Delay(d) => self.delayed_rx.push_back((now + d, m)),
                 }
             }
         }
         if let (Twin::Simulated(node), Some(id)) = (&mut self.twin, self.port.second_sender()) {
             node.on_second_sender(now, id);
+        }
+    }
+
+    fn handle(&mut self, now: f64, m: &GolfCarMessage) {
+        match &mut self.twin {
+            Twin::Simulated(node) => node.handle(now, m),
+            Twin::Physical(reported) => reported.handle(self.kind, m),
+        }
+    }
+
+    /// The injected actuator faults in force from `now` (a physical ECU has its own).
+    pub fn set_faults(&mut self, now: f64, faults: &crate::faults::ActuatorFaults) {
+        if let Twin::Simulated(node) = &mut self.twin {
+            node.set_faults(now, faults);
         }
     }
 
@@ -111,6 +151,23 @@ impl<B: Can> Station<B> {
 
     /// Send what the simulated ECU has due at `now`; `wall` is the wall-clock time.
     pub fn send_due(&mut self, now: f64, wall: f64) -> Result<(), BridgeError> {
+        self.send_due_with(now, wall, &mut |_| TxFault::default())
+    }
+
+    /// [`Self::send_due`] with `tx` deciding, frame by frame, what an injected fault
+    /// does to what the ECU sends.
+    pub fn send_due_with(
+        &mut self,
+        now: f64,
+        wall: f64,
+        tx: &mut dyn FnMut(&GolfCarMessage) -> TxFault,
+    ) -> Result<(), BridgeError> {
+        while self.delayed_tx.front().is_some_and(|d| d.0 <= now + 1e-9) {
+            if let Some((_, id, bytes)) = self.delayed_tx.pop_front() {
+                self.port.send_bytes(id, &bytes)?;
+                self.sent += 1;
+            }
+        }
         let Twin::Simulated(node) = &mut self.twin else {
             return Ok(());
         };
@@ -127,12 +184,48 @@ impl<B: Can> Station<B> {
                     self.safe_since = None;
                 } else if self.was_enabled && self.safe_since.is_none() {
                     self.safe_since = Some(now);
+                    self.safe_entries.push((now, node.safety_ref().fault()));
                 }
             }
-            self.port.send_message(&m)?;
-            self.sent += 1;
+            let fault = tx(&m);
+            if fault.drop {
+                continue;
+            }
+            let (id, mut data) = self.port.seal_message(&m)?;
+            match fault.counter {
+                // One counter value used up and never sent.
+                Some(CounterMode::Skip) => data = self.port.seal_message(&m)?.1,
+                Some(CounterMode::Repeat) => {
+                    if let Some(previous) = self.last_sent.get(&id) {
+                        data = *previous;
+                    }
+                }
+                None => {}
+            }
+            self.last_sent.insert(id, data);
+            if fault.corrupt_crc {
+                data[7] ^= 0x5a;
+            }
+            let bytes = &data[..fault.dlc.map_or(data.len(), usize::from)];
+            if fault.delay_s > 0.0 {
+                self.delayed_tx.push_back((now + fault.delay_s, id, bytes.to_vec()));
+            } else {
+                self.port.send_bytes(id, bytes)?;
+                self.sent += 1;
+            }
         }
         Ok(())
+    }
+
+    /// Send bytes as they are from this station's endpoint (a babbling node).
+    pub fn send_raw(&mut self, id: u16, bytes: &[u8]) -> Result<(), BridgeError> {
+        self.port.send_bytes(id, bytes)
+    }
+
+    /// Each entry into the safe state (reported disabled after being enabled):
+    /// simulated time and the fault the ECU reported then.
+    pub fn safe_entries(&self) -> &[(f64, Option<crate::ecu::safety::Cause>)] {
+        &self.safe_entries
     }
 
     /// Since when the simulated ECU has reported its safe state (disabled after it had
@@ -173,7 +266,7 @@ impl<B: Can> Station<B> {
             sent: self.sent,
             safe_state_trips: match &self.twin {
                 Twin::Simulated(node) => node.safety_ref().trips,
-                Twin::Physical(_) => [0; 5],
+                Twin::Physical(_) => [0; 6],
             },
             physical_reports: match &self.twin {
                 Twin::Simulated(_) => None,

@@ -7,6 +7,7 @@ use std::collections::VecDeque;
 use golf_car_can::{SteeringCmd, SteeringReport, SteeringReportFault};
 
 use super::safety::{Cause, Safety};
+use crate::faults::EcuFaultCode;
 use crate::scenario::SteeringConfig;
 
 /// The steering actuator and its controller.
@@ -22,6 +23,32 @@ pub struct SteeringEcu {
     max_rate_deg_s: f64,
     angle_deg: f64,
     rate_deg_s: f64,
+    /// Injected actuator faults (`[[faults]]`).
+    pub faults: SteeringFaults,
+}
+
+/// What injected faults do to the steering actuator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SteeringFaults {
+    /// The motor no longer moves the wheels.
+    pub stuck: bool,
+    /// The motor's rate is cut to this fraction.
+    pub rate_factor: f64,
+    /// The wheels sit this far from where the position sensor says, degrees.
+    pub offset_deg: f64,
+    /// A driver holds the wheel at this angle, against the motor (degrees).
+    pub driver_deg: Option<f64>,
+}
+
+impl Default for SteeringFaults {
+    fn default() -> Self {
+        SteeringFaults {
+            stuck: false,
+            rate_factor: 1.0,
+            offset_deg: 0.0,
+            driver_deg: None,
+        }
+    }
 }
 
 impl SteeringEcu {
@@ -36,6 +63,7 @@ impl SteeringEcu {
             max_rate_deg_s: max_rate,
             angle_deg: 0.0,
             rate_deg_s: 0.0,
+            faults: SteeringFaults::default(),
         }
     }
 
@@ -62,13 +90,23 @@ impl SteeringEcu {
                 self.max_rate_deg_s = rate;
             }
         }
-        if !self.safety.enabled() {
-            // Safe state: the motor holds the angle.
+        if let Some(driver) = self.faults.driver_deg {
+            // The driver's hands win: the wheel goes where they turn it, at the
+            // motor's full rate.
+            let step = (driver - self.angle_deg)
+                .clamp(-self.cfg.max_rate_deg_s * dt, self.cfg.max_rate_deg_s * dt);
+            self.rate_deg_s = step / dt;
+            self.angle_deg = (self.angle_deg + step).clamp(-self.limit_deg, self.limit_deg);
+            return;
+        }
+        if !self.safety.enabled() || self.faults.stuck {
+            // Safe state (or a stuck motor): the angle holds.
             self.rate_deg_s = 0.0;
             return;
         }
+        let max_rate = self.max_rate_deg_s * self.faults.rate_factor;
         let wanted = (self.target_deg - self.angle_deg) / self.cfg.time_constant_s;
-        let rate = wanted.clamp(-self.max_rate_deg_s, self.max_rate_deg_s);
+        let rate = wanted.clamp(-max_rate, max_rate);
         // Do not overshoot the target within one step.
         let step = rate * dt;
         let remaining = self.target_deg - self.angle_deg;
@@ -90,7 +128,8 @@ impl SteeringEcu {
 
     /// The actual road-wheel angle, degrees.
     pub fn angle_deg(&self) -> f64 {
-        (self.angle_deg + self.cfg.bias_deg).clamp(-self.limit_deg, self.limit_deg)
+        (self.angle_deg + self.cfg.bias_deg + self.faults.offset_deg)
+            .clamp(-self.limit_deg, self.limit_deg)
     }
 
     pub fn rate_deg_s(&self) -> f64 {
@@ -101,7 +140,7 @@ impl SteeringEcu {
     pub fn report(&self) -> SteeringReport {
         SteeringReport {
             enabled: self.safety.enabled(),
-            r#override: false,
+            r#override: self.faults.driver_deg.is_some(),
             fault: match self.safety.fault() {
                 None => SteeringReportFault::None,
                 Some(Cause::CommandTimeout) => SteeringReportFault::CommandTimeout,
@@ -109,6 +148,11 @@ impl SteeringEcu {
                 Some(Cause::Estop) => SteeringReportFault::Estop,
                 Some(Cause::FaultReport) => SteeringReportFault::FaultReport,
                 Some(Cause::SecondSender) => SteeringReportFault::SecondSender,
+                Some(Cause::Actuator) => match self.safety.actuator_fault() {
+                    Some(EcuFaultCode::Overcurrent) => SteeringReportFault::Overcurrent,
+                    Some(EcuFaultCode::Sensor) => SteeringReportFault::PositionSensor,
+                    _ => SteeringReportFault::Internal,
+                },
             },
             angle: self.angle_deg.clamp(-45.0, 45.0),
             rate: self.rate_deg_s.clamp(-500.0, 500.0),

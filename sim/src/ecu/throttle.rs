@@ -9,6 +9,7 @@ use golf_car_can::{
 };
 
 use super::safety::{Cause, Safety};
+use crate::faults::EcuFaultCode;
 use crate::scenario::ThrottleConfig;
 
 /// Deceleration when coasting (rolling resistance), m/s^2.
@@ -59,6 +60,27 @@ pub struct ThrottleEcu {
     speed: f64,
     throttle_pct: f64,
     brake_pct: f64,
+    /// Injected actuator faults (`[[faults]]`).
+    pub faults: ThrottleFaults,
+}
+
+/// What injected faults do to the drive and the brake.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThrottleFaults {
+    /// The throttle holds the wheel speed it had (a stuck pedal or motor controller):
+    /// commands no longer change it, only the safe state's brake does.
+    pub stuck: bool,
+    /// The brake gives this fraction of its deceleration.
+    pub brake_factor: f64,
+}
+
+impl Default for ThrottleFaults {
+    fn default() -> Self {
+        ThrottleFaults {
+            stuck: false,
+            brake_factor: 1.0,
+        }
+    }
 }
 
 impl ThrottleEcu {
@@ -77,6 +99,7 @@ impl ThrottleEcu {
             speed: 0.0,
             throttle_pct: 0.0,
             brake_pct: 0.0,
+            faults: ThrottleFaults::default(),
         }
     }
 
@@ -110,11 +133,15 @@ impl ThrottleEcu {
             }
         }
         let v = self.speed;
-        let (accel, throttle, brake) = if !self.safety.enabled() {
+        let brake_decel_max = self.cfg.brake_decel * self.faults.brake_factor;
+        let (accel, throttle, brake) = if self.faults.stuck && self.safety.enabled() {
+            // Stuck: the drive holds its speed whatever is commanded.
+            (0.0, self.throttle_pct, 0.0)
+        } else if !self.safety.enabled() {
             // Safe state: no drive, full brake.
-            (braked(v, 0.0, self.cfg.brake_decel), 0.0, 100.0)
+            (braked(v, 0.0, brake_decel_max), 0.0, 100.0)
         } else if self.demand.gear == ThrottleCmdGear::Neutral {
-            let b = self.demand.brake_pct / 100.0 * self.cfg.brake_decel;
+            let b = self.demand.brake_pct / 100.0 * brake_decel_max;
             (braked(v, 0.0, COAST_DECEL + b), 0.0, self.demand.brake_pct)
         } else {
             let max_accel = if self.demand.accel_limit > 0.0 {
@@ -130,7 +157,7 @@ impl ThrottleEcu {
             } else {
                 wanted.clamp(-self.cfg.max_decel, self.cfg.max_decel)
             };
-            let brake_decel = self.demand.brake_pct / 100.0 * self.cfg.brake_decel;
+            let brake_decel = self.demand.brake_pct / 100.0 * brake_decel_max;
             let a = braked(v, a, brake_decel);
             let decel_beyond_coast = (-a * direction(v) - COAST_DECEL).max(0.0);
             let brake =
@@ -178,6 +205,11 @@ impl ThrottleEcu {
                 Some(Cause::Estop) => ThrottleReportFault::Estop,
                 Some(Cause::FaultReport) => ThrottleReportFault::FaultReport,
                 Some(Cause::SecondSender) => ThrottleReportFault::SecondSender,
+                Some(Cause::Actuator) => match self.safety.actuator_fault() {
+                    Some(EcuFaultCode::Overcurrent) => ThrottleReportFault::Overcurrent,
+                    Some(EcuFaultCode::Sensor) => ThrottleReportFault::SpeedSensor,
+                    _ => ThrottleReportFault::Internal,
+                },
             },
             wheel_speed: self.speed.clamp(-10.0, 10.0),
             throttle: self.throttle_pct,
