@@ -97,9 +97,9 @@ PIP_PKGS=(
     virtme-ng==1.42     # `vng`: boots the kernel with the host fs shared; quirks above verified on 1.42
     cantools==45.1.0    # DBC encode/decode used by the tests
     pynmea2==1.19.0     # NMEA cross-check: sim/tests/gps_pynmea2.rs parses every simulated sentence
-    mcap==1.6.0         # an independent MCAP reader: tests/tests/record.rs opens run.mcap with it
     kubernetes==37.0.2  # the API models sim/tests/deploy.rs validates deploy/k8s/suite-job.yaml against
     pyyaml==6.0.3       # YAML for the same test (the manifest, the GitHub Actions workflow)
+    mcap==1.6.0         # an independent MCAP reader: tests/tests/record.rs opens run.mcap with it
 )
 PY=${PYTHON:-python3}
 
