@@ -96,6 +96,17 @@ fn in_repo(args: &[String]) -> Result<Vec<String>> {
     Ok(args.iter().map(|a| a.replacen(&image, &here, 1)).collect())
 }
 
+/// The workspace's `rust-version`.
+fn rust_version() -> Result<String> {
+    let workspace = std::fs::read_to_string(repo().join("Cargo.toml"))?;
+    Ok(workspace
+        .lines()
+        .find_map(|l| l.strip_prefix("rust-version = "))
+        .context("rust-version")?
+        .trim_matches('"')
+        .to_owned())
+}
+
 fn strings(v: &Value) -> Result<Vec<String>> {
     v.as_array()
         .context("a list")?
@@ -215,6 +226,12 @@ fn the_workflow_matrix_runs_every_item_once_and_the_merge_reads_every_shard() ->
             .map(str::to_owned)
             .with_context(|| format!("a {job} step runs {what}"))
     };
+    // The build uses the workspace's toolchain.
+    let toolchain = steps("build")?
+        .iter()
+        .find_map(|s| s["with"]["toolchain"].as_str().map(str::to_owned))
+        .context("the build job names its toolchain")?;
+    assert_eq!(toolchain, rust_version()?);
     let suite = run_line("suite", "ugv-sim suite")?;
     // The matrix value as one word (the expression has spaces).
     const SHARD: &str = "${{ matrix.shard }}";
@@ -315,12 +332,7 @@ fn the_dockerfile_builds_and_copies_what_exists_and_runs_a_valid_suite() -> Resu
     let docker = std::fs::read_to_string(repo().join("deploy/Dockerfile"))?;
     let lines: Vec<&str> = docker.lines().filter(|l| !l.starts_with('#')).collect();
     // The toolchain is the workspace's rust-version.
-    let workspace = std::fs::read_to_string(repo().join("Cargo.toml"))?;
-    let version = workspace
-        .lines()
-        .find_map(|l| l.strip_prefix("rust-version = "))
-        .context("rust-version")?
-        .trim_matches('"');
+    let version = rust_version()?;
     assert!(
         lines
             .iter()
