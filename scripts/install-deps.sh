@@ -44,6 +44,7 @@ APT_PKGS=(
     iproute2            # `ip link add dev vcan0 type vcan` inside the VM
     fonts-dejavu-core   # the font ugv-sim draws its figures with (plotters, ab_glyph)
     gpsd                # NMEA cross-check: sim/tests/gps_gpsd.rs runs gpsd -N -n -b on the simulated GPS pty
+    gpsd-clients        # gpsfake and gpspipe: tests/tests/record.rs replays a recorded gps.nmea into gpsd
 )
 # From bookworm-backports: the machine image ships qemu-utils 10.0 from backports,
 # which Breaks bookworm's qemu-system-common 7.2 (apt would remove qemu-utils).

@@ -149,3 +149,25 @@ impl Drop for NullModem {
         }
     }
 }
+
+/// The Python `mcap` package's summary of an MCAP file (tests/record_common/
+/// mcap_summary.py: per topic its schema, encodings, message count, first and last log
+/// time; whether the file was complete), read independently of ugv-sim. `PYTHON`
+/// chooses the interpreter.
+pub fn mcap_summary(path: &std::path::Path) -> anyhow::Result<serde_json::Value> {
+    let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/record_common/mcap_summary.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(path)
+        .output()
+        .map_err(|e| anyhow::anyhow!("running {python} (set PYTHON to choose another): {e}"))?;
+    anyhow::ensure!(
+        out.status.success(),
+        "{} (needs mcap==1.6.0 from scripts/install-deps.sh): {}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Ok(serde_json::from_slice(&out.stdout)?)
+}

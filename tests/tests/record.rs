@@ -22,25 +22,8 @@ use ugv_sim::record::{BUS_LOG, MCAP_FILE, NMEA_FILE, topics};
 use ugv_sim::sil::{Hook, SilRun, run_sil_recorded};
 use ugv_sim::verdict::Verdict;
 
-fn python() -> String {
-    std::env::var("PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
-/// The Python `mcap` package's view of `path` (record_common/mcap_summary.py).
 fn mcap_summary(path: &Path) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/record_common/mcap_summary.py");
-    let out = Command::new(python())
-        .arg(&script)
-        .arg(path)
-        .output()
-        .unwrap_or_else(|e| panic!("running {} (set PYTHON to choose another): {e}", python()));
-    assert!(
-        out.status.success(),
-        "{}: {}",
-        script.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    ugv_e2e_tests::mcap_summary(path).unwrap()
 }
 
 /// The paper's scenario, recorded in SIL into `dir`, to its goal or for `limit` s.
@@ -327,4 +310,93 @@ fn a_killed_simulator_leaves_its_recording_readable_to_a_second_before() {
     if let Some(d) = &report.divergence {
         assert!(d.time_s >= report.replayed_s - 0.02, "{d:?}");
     }
+}
+
+/// gps.nmea is the byte stream gpsfake replays into gpsd (Debian's gpsd-clients):
+/// gpsd reports a 3D RTK fix for every epoch, at the position of the epoch's GGA.
+#[test]
+fn gpsfake_feeds_gps_nmea_to_gpsd_which_reports_each_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    recorded_paper_run(dir.path(), Some(3.0));
+    let nmea = std::fs::read_to_string(dir.path().join(NMEA_FILE)).unwrap();
+    // Each GGA's time and position, read off its fields (ddmm.mmmm).
+    let degrees = |v: &str, hemi: &str, width: usize| {
+        let d: f64 = v[..width].parse().unwrap();
+        let m: f64 = v[width..].parse().unwrap();
+        let x = d + m / 60.0;
+        if hemi == "S" || hemi == "W" { -x } else { x }
+    };
+    let ggas: Vec<(String, f64, f64)> = nmea
+        .lines()
+        .filter(|l| l.contains("GGA,"))
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let hms = format!("{}:{}:{}", &f[1][..2], &f[1][2..4], &f[1][4..]);
+            (hms, degrees(f[2], f[3], 2), degrees(f[4], f[5], 3))
+        })
+        .collect();
+    assert_eq!(ggas.len(), 31, "3 s at 10 Hz from t = 0");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+        .to_string();
+    let mut fake = Command::new("gpsfake")
+        .args(["-1", "-q", "-c", "0.02", "-P", &port])
+        .arg(dir.path().join(NMEA_FILE))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| {
+            panic!("running gpsfake (Debian package gpsd-clients, scripts/install-deps.sh): {e}")
+        });
+    // gpsd takes a moment to listen; gpspipe prints its JSON reports.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let reports = loop {
+        let out = Command::new("gpspipe")
+            .args(["-w", "-n", "200", "-x", "8", &format!("localhost:{port}")])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        if text.contains("\"TPV\"") || Instant::now() > deadline {
+            break text;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let _ = fake.kill();
+    let _ = fake.wait();
+    let tpvs: Vec<Value> = reports
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter(|v| v["class"] == "TPV" && v["lat"].is_number())
+        .collect();
+    assert!(!tpvs.is_empty(), "no TPV from gpsd: {reports}");
+    let mut matched = std::collections::BTreeSet::new();
+    for tpv in &tpvs {
+        assert_eq!(tpv["mode"], 3, "{tpv}");
+        assert_eq!(tpv["status"], 3, "RTK fixed: {tpv}");
+        let time = tpv["time"].as_str().unwrap();
+        let (_, lat, lon) = ggas
+            .iter()
+            .find(|(hms, _, _)| time.contains(&format!("T{hms}")))
+            .unwrap_or_else(|| panic!("no GGA at {time}"));
+        assert!(
+            (tpv["lat"].as_f64().unwrap() - lat).abs() < 1e-8,
+            "{tpv} vs {lat}"
+        );
+        assert!(
+            (tpv["lon"].as_f64().unwrap() - lon).abs() < 1e-8,
+            "{tpv} vs {lon}"
+        );
+        matched.insert(time.to_owned());
+    }
+    // gpspipe connects (and gpsd reports) while gpsfake is already sending, one
+    // sentence per 20 ms: the first epochs may go by unreported (23 of 31 seen here).
+    assert!(
+        matched.len() >= 15,
+        "{} of 31 epochs reported",
+        matched.len()
+    );
 }
