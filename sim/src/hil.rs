@@ -257,6 +257,11 @@ impl Wires {
     /// What the gateways and the laser driver did, for the verdict.
     pub fn stats(&self) -> WireStats {
         WireStats {
+            gps_line: GpsLineStats {
+                written_bytes: self.gps.written(),
+                dropped_sentences: self.gps.dropped_sentences(),
+                dropped_bytes: self.gps.dropped_bytes(),
+            },
             gateways: self.gateways.iter().map(GatewayHandle::stats).collect(),
             laser_driver: self.driver.as_ref().map(ColaDriverThread::stats),
         }
@@ -266,8 +271,18 @@ impl Wires {
 /// Statistics of the wires that carry more than the simulator's own ends.
 #[derive(Clone, Debug, Serialize)]
 pub struct WireStats {
+    pub gps_line: GpsLineStats,
     pub gateways: Vec<GatewayStats>,
     pub laser_driver: Option<ColaDriverStats>,
+}
+
+/// The GPS line: what went out, and the whole sentences the receiver's transmit
+/// buffer dropped because the reader did not keep up.
+#[derive(Clone, Debug, Serialize)]
+pub struct GpsLineStats {
+    pub written_bytes: u64,
+    pub dropped_sentences: u64,
+    pub dropped_bytes: u64,
 }
 
 /// Block until a CONTROLLER_HEARTBEAT appears on `iface` (a controller started by

@@ -107,3 +107,111 @@ fn controller_reads_paced_fixes_through_the_link_and_its_input_is_logged() -> Re
     );
     Ok(())
 }
+
+/// A reader that stops reading (issue 16, item 5): the pty fills, and the receiver's
+/// transmit buffer drops whole sentences, never part of one, so what the reader gets
+/// when it reads again is whole sentences with good checksums, none spliced from two;
+/// every sentence sent was either read or counted as dropped.
+#[test]
+fn a_stalled_reader_loses_whole_sentences_never_parts() -> Result<()> {
+    let dir = tempfile::tempdir()?;
+    let link = dir.path().join("ugv-gps-stall");
+    let cfg = GpsConfig {
+        rate_hz: 20.0,
+        baud: 460_800,
+        ..GpsConfig::default()
+    };
+    let mut dev = device(cfg.clone())?;
+    let mut port = GpsPort::open(Some(&link), cfg.baud)?;
+    let mut reader = open_serial(&link, cfg.baud, Duration::from_millis(1))?;
+    let mut received = Vec::new();
+    fn drain(reader: &mut impl std::io::Read, received: &mut Vec<u8>) {
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            received.extend_from_slice(&buf[..n]);
+        }
+    }
+    let s = vehicle(0.0, 0.0, 0.0, 1.0, 0.0);
+    let mut sent = 0usize;
+    let mut now = 0.0;
+    let mut stalled_for = 0.0;
+    let mut k = 0u32;
+    // Read for 1 s; stall until the line has dropped sentences for a second (at most
+    // 60 s of sentences); read again for 2 s.
+    let mut phase = 0;
+    let mut resumed_at = 0.0;
+    while phase < 3 {
+        now = f64::from(k) * TICK_S;
+        k += 1;
+        if let Some(e) = port.tick(&mut dev, now, &s)? {
+            sent += e.text.matches('\n').count();
+        }
+        match phase {
+            0 => {
+                drain(&mut reader, &mut received);
+                if now >= 1.0 {
+                    phase = 1;
+                }
+            }
+            1 => {
+                if port.dropped_sentences() > 0 {
+                    stalled_for += TICK_S;
+                }
+                ensure!(now < 60.0, "60 s of sentences and nothing dropped");
+                if stalled_for >= 1.0 {
+                    phase = 2;
+                    resumed_at = now;
+                }
+            }
+            _ => {
+                drain(&mut reader, &mut received);
+                if now - resumed_at >= 2.0 {
+                    phase = 3;
+                }
+            }
+        }
+    }
+    // Let what is queued go out and be read.
+    for _ in 0..2000 {
+        now += TICK_S;
+        port.pace(now)?;
+        drain(&mut reader, &mut received);
+        if port.pacer().pending() == 0
+            && port.written() == port.pacer().released() - port.dropped_bytes()
+        {
+            break;
+        }
+    }
+    drain(&mut reader, &mut received);
+    let text = String::from_utf8(received).context("the NMEA is ASCII")?;
+    let lines: Vec<&str> = text.split_inclusive('\n').collect();
+    for line in &lines {
+        let body = line
+            .strip_prefix('$')
+            .and_then(|l| l.strip_suffix("\r\n"))
+            .with_context(|| format!("not a whole sentence: {line:?}"))?;
+        let (body, sum) = body
+            .rsplit_once('*')
+            .with_context(|| format!("no checksum: {line:?}"))?;
+        ensure!(
+            u8::from_str_radix(sum, 16).ok() == Some(checksum(body.as_bytes())),
+            "a sentence spliced from two (its checksum fails): {line:?}"
+        );
+    }
+    let dropped = port.dropped_sentences() as usize;
+    eprintln!(
+        "{sent} sentences sent, {} read, {dropped} dropped whole ({} bytes)",
+        lines.len(),
+        port.dropped_bytes()
+    );
+    ensure!(dropped > 0, "the stall dropped nothing");
+    ensure!(
+        lines.len() + dropped == sent,
+        "{} read + {dropped} dropped != {sent} sent",
+        lines.len()
+    );
+    Ok(())
+}

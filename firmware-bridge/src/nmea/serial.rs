@@ -203,9 +203,15 @@ impl PtyEndpoint {
     /// bytes written. Pacing at the baud rate is the caller's (see
     /// [`super::transmit_time`]): a pty enforces none.
     pub fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
-        let written = write_what_fits(&mut self.master, bytes, &self.slave_path)?;
+        let written = self.send_some(bytes)?;
         self.dropped_bytes += (bytes.len() - written) as u64;
         Ok(written)
+    }
+
+    /// Write what fits in the pty now and return how much that was; the rest stays
+    /// the caller's (a transmit buffer that drops whole sentences, not bytes).
+    pub fn send_some(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
+        write_what_fits(&mut self.master, bytes, &self.slave_path)
     }
 
     /// Bytes [`Self::send`] could not place.
@@ -327,9 +333,15 @@ impl SerialEndpoint {
 
     /// Write what the device takes now; the rest is dropped and counted.
     pub fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
-        let written = write_what_fits(&mut self.port, bytes, &self.path)?;
+        let written = self.send_some(bytes)?;
         self.dropped_bytes += (bytes.len() - written) as u64;
         Ok(written)
+    }
+
+    /// Write what the device takes now and return how much that was; the rest stays
+    /// the caller's.
+    pub fn send_some(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
+        write_what_fits(&mut self.port, bytes, &self.path)
     }
 
     pub fn dropped_bytes(&self) -> u64 {

@@ -121,6 +121,23 @@ impl Injector {
                     r.started_s = Some(now);
                 }
             }
+            // Faults of the actuators and the controller's process act on every
+            // physics step they are in force: those steps are what they inject.
+            let per_step = matches!(
+                f.kind,
+                FaultKind::SteeringStuck
+                    | FaultKind::SteeringRateCut { .. }
+                    | FaultKind::SteeringOffset { .. }
+                    | FaultKind::ThrottleStuck
+                    | FaultKind::BrakeWeak { .. }
+                    | FaultKind::EcuFault { .. }
+                    | FaultKind::DriverOverride { .. }
+                    | FaultKind::ControllerKill
+                    | FaultKind::ControllerStop
+            );
+            if per_step && Self::in_force(f, r, now) {
+                r.injected += 1;
+            }
         }
     }
 
@@ -328,6 +345,8 @@ impl Injector {
                     self.count(i);
                     return None;
                 }
+                // The receiver made this epoch with the fix kind or offset forced.
+                FaultKind::GpsQuality { .. } | FaultKind::GpsJump { .. } => self.count(i),
                 FaultKind::GpsStale => {
                     if let Some(old) = &self.last_gps_text {
                         epoch.text = old.clone();
@@ -565,7 +584,8 @@ pub struct FaultRecord {
     /// When it started (never, when its distance was not reached), simulated seconds.
     pub started_s: Option<f64>,
     pub ended_s: Option<f64>,
-    /// Frames, epochs, scans or sentences it altered, dropped or added.
+    /// What it altered, dropped or added: CAN frames, GPS epochs or sentences, laser
+    /// scans; for actuator and process faults, the physics steps it was in force.
     pub injected: u64,
     /// The first reaction after its start: the controller's estop or FAULT_REPORT, or
     /// an ECU entering its safe state (with the fault it reported).

@@ -14,6 +14,15 @@ use crate::vehicle::VehicleState;
 /// Lines kept by default in the input log.
 pub const INPUT_LOG_LINES: usize = 32;
 
+/// The receiver's transmit buffer, bytes: what the UART has released but the line has
+/// not taken yet (a reader that stalls). A sentence that would not fit whole is
+/// dropped whole, as a receiver's buffer does, never cut: the reader then misses
+/// sentences, but never gets one spliced from two.
+pub const TX_BUFFER: usize = 1024;
+
+/// The longest NMEA 0183 sentence, with its CR LF.
+const SENTENCE_MAX: usize = 82;
+
 /// What the controller wrote to the receiver (a GGA for NTRIP, configuration
 /// commands): the last lines, and counts.
 #[derive(Debug, Clone)]
@@ -91,7 +100,13 @@ pub struct GpsPort {
     pacer: Pacer,
     input: InputLog,
     out: Vec<u8>,
+    /// Released by the pacer, not yet taken by the line (at most [`TX_BUFFER`]).
+    unsent: VecDeque<u8>,
+    /// Dropping the rest of a sentence that did not fit.
+    dropping: bool,
     written: u64,
+    dropped_sentences: u64,
+    dropped_bytes: u64,
 }
 
 /// The receiver's end of the line.
@@ -102,10 +117,10 @@ enum Line {
 }
 
 impl Line {
-    fn send(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
+    fn send_some(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
         match self {
-            Line::Pty(p) => p.send(bytes),
-            Line::Serial(s) => s.send(bytes),
+            Line::Pty(p) => p.send_some(bytes),
+            Line::Serial(s) => s.send_some(bytes),
         }
     }
 
@@ -124,7 +139,11 @@ impl GpsPort {
             pacer: Pacer::new(baud),
             input: InputLog::new(INPUT_LOG_LINES),
             out: Vec::new(),
+            unsent: VecDeque::new(),
+            dropping: false,
             written: 0,
+            dropped_sentences: 0,
+            dropped_bytes: 0,
         }
     }
 
@@ -170,11 +189,30 @@ impl GpsPort {
     pub fn pace(&mut self, now: f64) -> Result<usize, GpsError> {
         self.out.clear();
         self.pacer.release(now, &mut self.out);
-        let n = if self.out.is_empty() {
+        for &b in &self.out {
+            // A sentence starts after a LF (or on an empty buffer's first byte); one
+            // that would not fit whole is dropped to its LF.
+            let at_start = self.unsent.back().is_none_or(|&last| last == b'\n');
+            if !self.dropping && at_start && self.unsent.len() + SENTENCE_MAX > TX_BUFFER {
+                self.dropping = true;
+            }
+            if self.dropping {
+                self.dropped_bytes += 1;
+                if b == b'\n' {
+                    self.dropping = false;
+                    self.dropped_sentences += 1;
+                }
+            } else {
+                self.unsent.push_back(b);
+            }
+        }
+        let n = if self.unsent.is_empty() {
             0
         } else {
-            // What does not fit (nobody reading) is dropped and counted by the line.
-            self.line.send(&self.out)?
+            let (head, _) = self.unsent.as_slices();
+            let n = self.line.send_some(head)?;
+            self.unsent.drain(..n);
+            n
         };
         self.written += n as u64;
         for f in self.line.read_input()? {
@@ -213,11 +251,13 @@ impl GpsPort {
         self.written
     }
 
-    /// Bytes lost because the line was full (nobody reading).
+    /// Bytes of the sentences dropped because the line was full (nobody reading).
     pub fn dropped_bytes(&self) -> u64 {
-        match &self.line {
-            Line::Pty(p) => p.dropped_bytes(),
-            Line::Serial(s) => s.dropped_bytes(),
-        }
+        self.dropped_bytes
+    }
+
+    /// Whole sentences dropped because the reader did not keep up.
+    pub fn dropped_sentences(&self) -> u64 {
+        self.dropped_sentences
     }
 }

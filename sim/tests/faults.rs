@@ -1,0 +1,188 @@
+//! Fault injection (issue 16): the fault suite in SIL, the plan's validation, and the
+//! injected frames agreeing with what the controller's receiver rejected.
+
+use ugv_controller::config::FollowerKind;
+use ugv_sim::faults::plan::{PlanFile, kind_names};
+use ugv_sim::scenario::Scenario;
+use ugv_sim::sil::{Hook, run_sil_with};
+use ugv_sim::suite;
+
+fn fault_files() -> Vec<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/faults");
+    suite::scenario_files(&dir).expect("fault suite folder")
+}
+
+#[test]
+fn the_fault_suite_passes_in_sil_and_covers_every_kind() {
+    let files = fault_files();
+    assert!(files.len() >= 30, "{} fault scenarios", files.len());
+    let entries = suite::run_suite(
+        &files,
+        2,
+        &suite::default_tune(FollowerKind::Optimal),
+        &|_, _| {},
+    );
+    assert_eq!(entries.len(), files.len());
+    let mut kinds = std::collections::BTreeSet::new();
+    for e in &entries {
+        let v = e
+            .verdict
+            .as_ref()
+            .unwrap_or_else(|| panic!("{}: {:?}", e.name, e.error));
+        assert!(v.passed, "{}: {:?}", e.name, v.failures);
+        assert!(!v.report.faults.is_empty(), "{}: no fault injected", e.name);
+        for f in &v.report.faults {
+            let start = f
+                .started_s
+                .unwrap_or_else(|| panic!("{}: never started", e.name));
+            assert!(
+                f.injected > 0,
+                "{}: {} altered nothing",
+                e.name,
+                f.fault.kind.name()
+            );
+            // A detection comes after the fault, never before.
+            if let Some(d) = f.detected_s {
+                assert!(
+                    d + 1e-9 >= start,
+                    "{}: detected at {d} before {start}",
+                    e.name
+                );
+            }
+            kinds.insert(f.fault.kind.name());
+        }
+    }
+    let missing: Vec<_> = kind_names()
+        .into_iter()
+        .filter(|k| !kinds.contains(k))
+        .collect();
+    assert!(missing.is_empty(), "kinds no scenario injects: {missing:?}");
+}
+
+/// A scenario's text with a fault table appended.
+fn with_fault(table: &str) -> String {
+    format!(
+        "name = \"t\"\n[start]\nx = 0.0\ny = 0.0\nheading_deg = 0.0\n[goal]\nx = 20.0\ny = 0.0\n{table}"
+    )
+}
+
+#[test]
+fn bad_fault_plans_are_refused_with_file_line_and_field() {
+    let cases = [
+        (
+            "[[faults]]\nkind = \"gps_teleport\"\nat_s = 1.0\n",
+            "t.toml:10: faults[0].kind: \"gps_teleport\" is not a fault kind",
+        ),
+        (
+            "[[faults]]\nkind = \"gps_outage\"\nat_s = 1.0\nnode = \"steering\"\n",
+            "t.toml:12: faults[0].node: gps_outage takes no node",
+        ),
+        (
+            "[[faults]]\nkind = \"gps_outage\"\nduration_s = 1.0\n",
+            "faults[0].at_s: missing",
+        ),
+        (
+            "[[faults]]\nkind = \"gps_outage\"\nat_s = 1.0\nafter_m = 3.0\n",
+            "t.toml:12: faults[0].after_m: give at_s or after_m, not both",
+        ),
+        (
+            "[[faults]]\nkind = \"can_corrupt_crc\"\nat_s = 1.0\nnode = \"controller\"\n",
+            "t.toml:12: faults[0].node: can_corrupt_crc rewrites the frames an ECU sends",
+        ),
+        (
+            "[[faults]]\nkind = \"can_drop\"\nat_s = 1.0\nnode = \"steering\"\nprobability = 1.5\n",
+            "t.toml:13: faults[0].probability:",
+        ),
+        (
+            "[[faults]]\nkind = \"controller_stop\"\nat_s = 1.0\n",
+            "faults[0].duration_s: missing: controller_stop needs a duration",
+        ),
+        (
+            "[[faults]]\nkind = \"controller_kill\"\nat_s = 1.0\nduration_s = 2.0\n",
+            "t.toml:12: faults[0].duration_s: controller_kill lasts to the end of the run",
+        ),
+        (
+            "[[faults]]\nkind = \"gps_jump\"\nat_s = 1.0\neast_m = nan\nnorth_m = 0.0\n",
+            "t.toml:12: faults[0].east_m:",
+        ),
+        (
+            "[[faults]]\nkind = \"laser_occluded\"\nat_s = 1.0\nfrom_deg = 10.0\nto_deg = -10.0\n",
+            "t.toml:13: faults[0].to_deg:",
+        ),
+        (
+            "[expect]\nsafe_within_s = 1.0\necus_stay_enabled = true\n",
+            "t.toml:11: expect.ecus_stay_enabled: contradicts safe_within_s",
+        ),
+    ];
+    for (table, want) in cases {
+        let text = with_fault(table);
+        let err = Scenario::from_toml(&text, "t.toml")
+            .expect_err(table)
+            .to_string();
+        assert!(err.contains(want), "{table}\n got: {err}\nwant: {want}");
+    }
+    // Unknown keys are refused by the parser, with their line.
+    let err = Scenario::from_toml(
+        &with_fault("[[faults]]\nkind = \"gps_outage\"\nat_s = 1.0\nwhen = 2\n"),
+        "t.toml",
+    )
+    .expect_err("unknown key")
+    .to_string();
+    assert!(err.contains("when"), "{err}");
+    // A plan file is checked the same way, under its own name.
+    let err = PlanFile::from_toml("[[faults]]\nkind = \"laser_blackout\"\n", "plan.toml")
+        .expect_err("no start")
+        .to_string();
+    assert!(
+        err.contains("plan.toml:1: faults[0].at_s: missing"),
+        "{err}"
+    );
+}
+
+/// Each frame the injector corrupts is a frame the controller's receiver rejects, for
+/// the reason injected (counted over the whole run, after the fault has ended).
+#[test]
+fn injected_frames_are_the_frames_the_controller_rejects() {
+    for (table, rejected) in [
+        (
+            "kind = \"can_corrupt_crc\"\nnode = \"steering\"\n",
+            (|s: &golf_car_can::E2eStats| s.bad_crc) as fn(&golf_car_can::E2eStats) -> u64,
+        ),
+        ("kind = \"can_dlc\"\nnode = \"throttle\"\ndlc = 3\n", |s| {
+            s.wrong_dlc
+        }),
+        (
+            "kind = \"can_counter\"\nnode = \"throttle\"\nmode = \"repeat\"\n",
+            |s| s.repeated_counter,
+        ),
+    ] {
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite/01-paper.toml"),
+        )
+        .expect("paper scenario")
+            + &format!(
+                "\n[sim]\ntime_limit_s = 8.0\n[success]\nreach_goal = false\n[[faults]]\n{table}at_s = 3.0\nduration_s = 0.5\n"
+            );
+        let sc = Scenario::from_toml(&text, "t.toml").expect(table);
+        let cfg = suite::default_tune(FollowerKind::Optimal)(&sc);
+        let mut stats = golf_car_can::E2eStats::default();
+        let run = run_sil_with(sc, &cfg, |_, rt| {
+            stats = rt.can().stats();
+            Hook::Continue
+        })
+        .expect("SIL run");
+        let faults = run.sim.fault_records();
+        let injected = faults[0].injected;
+        assert!(
+            injected >= 20,
+            "{table}: {injected} frames injected in 0.5 s"
+        );
+        assert_eq!(rejected(&stats), injected, "{table}: {stats:?}");
+        // And the controller stopped the car for it.
+        assert!(
+            faults[0].steering_safe_ms.is_some() && faults[0].throttle_safe_ms.is_some(),
+            "{table}: {:?}",
+            faults[0]
+        );
+    }
+}
