@@ -16,6 +16,10 @@
 //!   along the route (1 m at a time, up to the goal) or, failing that, back towards
 //!   the car (down to `horizon_min_m`). A start-goal mission no longer than the
 //!   horizon is planned exactly as before: one leg, the goal as the local goal.
+//! - Detours: when the local goal has no feasible path, other local goals (shifted
+//!   sideways, or at half the distance; [`Navigator::detours`]) are planned in the
+//!   order of their stated cost, each its own Qu et al. polynomial, and the first
+//!   feasible one is taken ([`solve`]).
 //!
 //! - Steering limit: among the feasible a6 the cheapest path within 85 % of the
 //!   actuator's limit is taken (the method has no steering constraint).
@@ -202,9 +206,9 @@ const PROGRESS_AHEAD: f64 = 5.0;
 /// Step of the search for a clear local goal along the route, metres.
 const LOCAL_GOAL_STEP: f64 = 1.0;
 /// Sideways shifts of a detour's local goal, metres (negative: right).
-const DETOUR_SHIFTS: [f64; 6] = [-1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
+const DETOUR_SHIFTS: [f64; 7] = [0.0, -1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
 /// Most detours tried per replanning.
-const MAX_DETOURS: usize = 6;
+const MAX_DETOURS: usize = 8;
 
 /// Whether `p` lies outside every static obstacle grown by `r0`.
 fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
@@ -219,6 +223,9 @@ const LOCAL_GOAL_APPROACH: f64 = 5.0;
 /// A local goal's heading in its frame is kept within this (y(x) cannot arrive
 /// steeper), radians.
 const MAX_GOAL_HEADING: f64 = 1.2;
+/// A local goal before the goal arrives within this of its chord, so that round a
+/// corner the car turns over several replannings instead of at once, radians.
+const MAX_LOCAL_HEADING: f64 = 0.5;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -335,31 +342,41 @@ impl Navigator {
     }
 
     /// Local goals to try when the first has no feasible path (detours): the first
-    /// local goal shifted sideways by 1.5, 3 and 4.5 m (right first, then left), then
-    /// the same at half the distance along the route; each clear of every inflated
-    /// static obstacle; at most `MAX_DETOURS`. The order is the stated cost: the least
-    /// lateral shift, then the farther goal, wins among those with a feasible path.
+    /// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
+    /// its distance, unshifted and shifted the same; each clear of every inflated
+    /// static obstacle; at most `MAX_DETOURS`. The order is the stated cost, and the
+    /// first with a feasible path wins: the least lateral shift, then the farther
+    /// goal, then right before left.
     pub fn detours(&self, s: f64, first: &RoutePoint, obstacles: &[Circle]) -> Vec<RoutePoint> {
         let r0 = self.cfg.vehicle.radius + self.cfg.planner.safety_margin;
         let half = self.route.at(s + (first.s - s) / 2.0);
-        let mut out = Vec::new();
-        for base in [*first, half] {
+        let mut tries: Vec<(f64, RoutePoint)> = Vec::new();
+        for (i, base) in [*first, half].into_iter().enumerate() {
             if base.s - s < self.cfg.planner.horizon_min_m / 2.0 {
                 continue;
             }
+            let (nx, ny) = (-base.heading.sin(), base.heading.cos());
             for shift in DETOUR_SHIFTS {
-                let (nx, ny) = (-base.heading.sin(), base.heading.cos());
+                if i == 0 && shift == 0.0 {
+                    continue;
+                }
                 let g = RoutePoint {
                     x: base.x + shift * nx,
                     y: base.y + shift * ny,
                     ..base
                 };
-                if clear_of(&g, obstacles, r0) && out.len() < MAX_DETOURS {
-                    out.push(g);
+                if clear_of(&g, obstacles, r0) {
+                    tries.push((shift, g));
                 }
             }
         }
-        out
+        // Stable: right before left stays from DETOUR_SHIFTS.
+        tries.sort_by(|a, b| {
+            a.0.abs()
+                .total_cmp(&b.0.abs())
+                .then(b.1.s.total_cmp(&a.1.s))
+        });
+        tries.into_iter().take(MAX_DETOURS).map(|t| t.1).collect()
     }
 
     /// The planning problem towards `goal` from `pose` at `now`, in the frame from the
@@ -373,6 +390,11 @@ impl Navigator {
         goal: &RoutePoint,
     ) -> (PlanProblem, PathFrame, bool) {
         let frame = PathFrame::new((here.x, here.y), (goal.x, goal.y));
+        let max_heading = if goal.s < self.route.length() {
+            MAX_LOCAL_HEADING
+        } else {
+            MAX_GOAL_HEADING
+        };
         let (px, py) = frame.to_path(pose.x, pose.y);
         let theta = wrap(pose.theta - frame.angle);
         let pc = &self.cfg.planner;
@@ -390,7 +412,7 @@ impl Navigator {
             goal: planner::VehicleState {
                 x: frame.length,
                 y: 0.0,
-                theta: wrap(goal.heading - frame.angle).clamp(-MAX_GOAL_HEADING, MAX_GOAL_HEADING),
+                theta: wrap(goal.heading - frame.angle).clamp(-max_heading, max_heading),
                 phi: 0.0,
             },
             line_start: planner::LineStart { x0: 0.0, y0: 0.0 },
@@ -758,6 +780,10 @@ pub struct PlanOutcome {
 /// fastest pace with a feasible path is taken. The Qu et al. constraint is then a
 /// space-time one: the obstacle's predicted position at the instant the car is at each
 /// x. With no pace feasible the car stops (it yields).
+///
+/// The local goal's problem is solved first; when it has no feasible path, the
+/// detours' problems in their order ([`PlanRequest::detours`]), and the first with
+/// one is taken, in its own frame ([`PlanOutcome::frame`]).
 pub fn solve(req: &PlanRequest) -> PlanOutcome {
     if let Some(align) = &req.align {
         let (_, mut record) = record(req.time, &req.frame, None, false);
@@ -1271,5 +1297,108 @@ mod tests {
         assert!(nav.request(0.0, &aligned, &[]).align.is_none());
         nav.accept(solve(&nav.request(0.0, &aligned, &[])));
         assert!(matches!(nav.follow(&aligned), Guidance::Drive { .. }));
+    }
+
+    fn long_route() -> ControllerConfig {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.waypoints = vec![crate::route::Waypoint {
+            x: 50.0,
+            y: 0.0,
+            tolerance: 2.0,
+            heading_deg: None,
+            speed_limit: None,
+        }];
+        cfg.mission.goal_x = 50.0;
+        cfg.mission.goal_y = 60.0;
+        cfg
+    }
+
+    #[test]
+    fn a_long_route_is_planned_towards_a_local_goal_on_it() {
+        let cfg = long_route();
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let req = nav.request(0.0, &pose, &[]);
+        assert!((req.problem.goal.x - cfg.planner.horizon_m).abs() < 1e-9);
+        assert_eq!(req.problem.goal.theta, 0.0, "the route's heading there");
+        assert!(matches!(
+            replan_and_follow(&mut nav, &pose, &[]),
+            Guidance::Drive { .. }
+        ));
+        let end = nav
+            .plans
+            .last()
+            .and_then(|p| p.path.last().copied())
+            .expect("path");
+        assert!(
+            (end[0] - 20.0).abs() < 1e-6 && end[1].abs() < 1e-6,
+            "{end:?}"
+        );
+        // Nearer the corner than the horizon: the local goal is round it, on the
+        // second leg, arriving within MAX_LOCAL_HEADING of its chord.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        for x in 0..=40 {
+            nav.follow(&Pose {
+                x: f64::from(x),
+                ..pose
+            });
+        }
+        let at = Pose { x: 40.0, ..pose };
+        let g = nav.local_goal(40.0, &[]);
+        assert!(
+            (g.x - 50.0).abs() < 1e-9 && (g.y - 10.0).abs() < 1e-9,
+            "{g:?}"
+        );
+        let req = nav.request(0.0, &at, &[]);
+        assert!(req.problem.goal.theta.abs() <= MAX_LOCAL_HEADING + 1e-12);
+        // A post on the local goal moves it on along the route, 5 m of approach clear.
+        let post = Circle {
+            x: 50.0,
+            y: 10.0,
+            radius: 0.5,
+            vx: 0.0,
+            vy: 0.0,
+        };
+        let moved = nav.local_goal(40.0, &[post]);
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        assert!(
+            moved.y - 5.0 > post.y + post.radius + r0 - 1e-9,
+            "{moved:?}"
+        );
+    }
+
+    #[test]
+    fn detours_are_clear_and_ordered_by_shift_then_distance() {
+        let cfg = long_route();
+        let nav = Navigator::new(&cfg).expect("navigator");
+        let first = nav.local_goal(0.0, &[]);
+        let post = Circle {
+            x: 20.0,
+            y: -1.5,
+            radius: 0.5,
+            vx: 0.0,
+            vy: 0.0,
+        };
+        let d = nav.detours(0.0, &first, &[post]);
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        assert!(!d.is_empty() && d.len() <= MAX_DETOURS);
+        assert!(d.iter().all(|g| clear_of(g, &[post], r0)));
+        // The route's point at half the distance, unshifted, comes first.
+        assert!(
+            (d[0].x - 10.0).abs() < 1e-9 && d[0].y.abs() < 1e-9,
+            "{:?}",
+            d[0]
+        );
+        let shifts: Vec<f64> = d
+            .iter()
+            .map(|g| nav.route.at(g.s).y.hypot(0.0) + g.y.abs())
+            .collect();
+        assert!(shifts.windows(2).all(|w| w[0] <= w[1] + 1e-9), "{shifts:?}");
     }
 }

@@ -18,6 +18,8 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     m.goal_y = scenario.goal.y;
     m.goal_heading_deg = scenario.goal.heading_deg;
     m.goal_tolerance = scenario.goal.tolerance;
+    m.goal_speed_limit = scenario.goal.speed_limit;
+    m.waypoints = scenario.waypoints.clone();
     let v = &mut cfg.vehicle;
     v.wheelbase = scenario.vehicle.wheelbase;
     v.max_steer_deg = scenario.vehicle.max_steer_deg;
@@ -29,6 +31,9 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.laser_y = scenario.laser.mount_y;
     v.laser_yaw_deg = scenario.laser.mount_yaw_deg;
     cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
+    if let Some(r) = scenario.controller.detection_radius {
+        cfg.perception.detection_radius = r;
+    }
     cfg.planner.cruise_speed = cfg.planner.cruise_speed.min(scenario.vehicle.max_speed);
     cfg.follower.kind = follower;
     cfg

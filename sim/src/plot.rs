@@ -139,6 +139,10 @@ fn bounds(fig: &Figure<'_>) -> (f64, f64, f64, f64) {
     let sc = fig.scenario;
     let mut xs = vec![sc.start.x, sc.goal.x];
     let mut ys = vec![sc.start.y, sc.goal.y];
+    for w in &sc.waypoints {
+        xs.push(w.x);
+        ys.push(w.y);
+    }
     for (_, s) in fig.driven {
         xs.push(s.x);
         ys.push(s.y);
@@ -295,6 +299,29 @@ where
             });
             first_fp = false;
         }
+    }
+    if !sc.waypoints.is_empty() {
+        let route: Vec<(f64, f64)> = std::iter::once((sc.start.x, sc.start.y))
+            .chain(sc.waypoints.iter().map(|w| (w.x, w.y)))
+            .chain(std::iter::once((sc.goal.x, sc.goal.y)))
+            .collect();
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                route,
+                RGBColor(0, 140, 0).mix(0.5).stroke_width(1),
+            )))
+            .map_err(e)?
+            .label("route")
+            .legend(|(x, y)| {
+                PathElement::new([(x, y), (x + 14, y)], RGBColor(0, 140, 0).stroke_width(1))
+            });
+        chart
+            .draw_series(
+                sc.waypoints
+                    .iter()
+                    .map(|w| Circle::new((w.x, w.y), 4, RGBColor(0, 140, 0).stroke_width(1))),
+            )
+            .map_err(e)?;
     }
     chart
         .draw_series([

@@ -281,6 +281,16 @@ impl Default for SuccessCriteria {
     }
 }
 
+/// What a scenario sets of the controller's tuning (`[controller]`), as a field team
+/// would for a site; everything else is the controller's default.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ControllerTuning {
+    /// Perception's detection radius, metres (default: the controller's 8 m, the
+    /// paper's); up to the laser's range.
+    pub detection_radius: Option<f64>,
+}
+
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -305,6 +315,8 @@ pub struct Scenario {
     pub success: SuccessCriteria,
     /// Which devices are simulated and which physical (all simulated by default).
     pub devices: crate::devices::map::DeviceMap,
+    /// The controller's tuning for this scenario, where it differs from its defaults.
+    pub controller: ControllerTuning,
     /// Faults injected during the run (`[[faults]]`), in the order written.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub faults: Vec<crate::faults::FaultSpec>,
@@ -340,6 +352,7 @@ impl Default for Scenario {
             sim: SimConfig::default(),
             success: SuccessCriteria::default(),
             devices: Default::default(),
+            controller: ControllerTuning::default(),
             faults: Vec::new(),
             expect: Default::default(),
         }
@@ -496,6 +509,14 @@ impl Scenario {
                 v,
                 self.vehicle.max_speed,
                 "m/s (vehicle.max_speed)",
+            )?;
+        }
+        if let Some(r) = self.controller.detection_radius {
+            positive_up_to(
+                &at(&["controller", "detection_radius"]),
+                r,
+                self.laser.spec().range_max,
+                "m (the laser's range_max)",
             )?;
         }
         // The controller's own rule (its mission.waypoints): every leg has a length.

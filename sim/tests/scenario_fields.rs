@@ -109,6 +109,27 @@ fn a_goal_a_step_from_the_start_is_refused_by_the_scenario_itself() {
 }
 
 #[test]
+fn route_waypoints_and_the_perception_range_are_refused_with_their_line() {
+    let route = "[start]\nx = 0\ny = 0\n\n[goal]\nx = 40\ny = 0\n\n[[waypoints]]\nx = 20\ny = 0\n\n[[waypoints]]\nx = 20.4\ny = 0\n";
+    let e = invalid(route);
+    assert_eq!((e.field.as_str(), e.line), ("waypoints[1].x", 14), "{e}");
+    assert!(e.message.contains("at least 1 m"), "{e}");
+    let e = invalid("[[waypoints]]\nx = 20\ny = 0\nspeed_limit = -1\n");
+    assert_eq!(
+        (e.field.as_str(), e.line),
+        ("waypoints[0].speed_limit", 4),
+        "{e}"
+    );
+    let e = invalid("[controller]\ndetection_radius = 50.0\n");
+    assert_eq!(
+        (e.field.as_str(), e.line),
+        ("controller.detection_radius", 2),
+        "{e}"
+    );
+    assert!(Scenario::from_toml("[controller]\ndetection_radius = 16.0\n", "ok.toml").is_ok());
+}
+
+#[test]
 fn an_obstacle_beyond_f32_is_refused_not_collided_with() {
     let e = invalid("[[obstacles]]\nkind = \"circle\"\nx = 1e39\ny = 0\nradius = 1\n");
     assert_eq!(
