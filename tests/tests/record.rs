@@ -400,3 +400,32 @@ fn gpsfake_feeds_gps_nmea_to_gpsd_which_reports_each_fix() {
         matched.len()
     );
 }
+
+/// The recording's arguments are checked before anything runs: `--pace` bounded and
+/// for SIL only, `replay` of a missing file named.
+#[test]
+fn recording_arguments_are_refused_naming_what_is_wrong() {
+    let sim = workspace_bin("ugv-sim").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (args, code, says) in [
+        (&["run", "--sil", "--pace", "0"][..], 2, "--pace"),
+        (&["run", "--sil", "--pace", "nan"][..], 2, "--pace"),
+        (
+            &["run", "--pace", "1", "--time-limit", "1"][..],
+            4,
+            "--pace is for SIL runs",
+        ),
+        (&["replay", "absent.mcap"][..], 4, "absent.mcap"),
+        (&["replay"][..], 2, "RECORDING"),
+    ] {
+        let out = Command::new(&sim)
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
