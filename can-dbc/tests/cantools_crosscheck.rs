@@ -5,6 +5,9 @@
 //! Needs `python3` with `cantools` (scripts/install-deps.sh installs it); fails
 //! loudly when it is missing.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used, clippy::panic)]
+
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 

@@ -1,15 +1,28 @@
 //! The generated codecs against the contract in DESIGN.md, property tests for every
 //! encode/decode pair, and the E2E protection.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used)]
+
 use golf_car_can::e2e::{self, E2eError, E2eRx, E2eTx, crc8_sae_j1850, frame_crc, protect};
 use golf_car_can::spec::{ByteOrder, SignalSpec, ValueLabel};
 use golf_car_can::*;
 use proptest::prelude::*;
 use std::borrow::Cow;
 
+/// A row of DESIGN.md's CAN table: ID, message, period and receiver timeout (ms),
+/// receivers.
+type DesignRow = (
+    u16,
+    &'static str,
+    Option<u32>,
+    Option<u32>,
+    &'static [&'static str],
+);
+
 #[test]
 fn network_matches_the_design_table() {
-    let expect: [(u16, &str, Option<u32>, Option<u32>, &[&str]); 6] = [
+    let expect: [DesignRow; 6] = [
         (
             0x080,
             "CONTROLLER_HEARTBEAT",

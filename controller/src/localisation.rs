@@ -222,7 +222,7 @@ mod tests {
     fn antenna_offset_is_removed_along_the_heading() {
         let cfg = ControllerConfig::default();
         let mut loc = Localiser::new(&cfg).expect("datum");
-        let frame = loc.frame.clone();
+        let frame = loc.frame;
         // Heading 45 degrees CCW from East = course 45 degrees from North.
         let (ax, theta) = (cfg.vehicle.antenna_x, 45f64.to_radians());
         loc.on_fix(
@@ -247,7 +247,7 @@ mod tests {
     fn dead_reckoning_follows_the_bicycle_model_between_fixes() {
         let cfg = ControllerConfig::default();
         let mut loc = Localiser::new(&cfg).expect("datum");
-        let frame = loc.frame.clone();
+        let frame = loc.frame;
         loc.on_actuators(0.0, 2.0, 0.0);
         loc.on_fix(
             0.0,
@@ -261,7 +261,7 @@ mod tests {
     fn no_heading_until_observed_and_no_position_without_a_fix() {
         let cfg = ControllerConfig::default();
         let mut loc = Localiser::new(&cfg).expect("datum");
-        let frame = loc.frame.clone();
+        let frame = loc.frame;
         let mut r = reading(&frame, 0.0, 0.0, None);
         r.quality = Some(FixQuality::Invalid);
         loc.on_fix(0.0, &r);
@@ -284,7 +284,7 @@ mod tests {
         let mut cfg = ControllerConfig::default();
         cfg.safety.gps_rate_hz = 1.0;
         let mut loc = Localiser::new(&cfg).expect("datum");
-        let frame = loc.frame.clone();
+        let frame = loc.frame;
         loc.on_fix(
             0.0,
             &reading(&frame, cfg.vehicle.antenna_x, 0.0, Some(90.0)),

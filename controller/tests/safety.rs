@@ -3,6 +3,9 @@
 //! estop, ECUs disabled with full brake, FAULT_REPORT) on laser silence, a silent ECU
 //! report, an actuator fault or a lost GPS fix; no command ever leaves its limits.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used)]
+
 use firmware_bridge::Received;
 use firmware_bridge::geodesy::{Enu, LocalFrame, theta_to_course_deg};
 use firmware_bridge::nmea::{FixQuality, GpsReading};
@@ -84,7 +87,7 @@ impl Rig {
                     &Received::Message(GolfCarMessage::ThrottleReport(throttle)),
                 );
             }
-            if feed.gps && k % 10 == 0 {
+            if feed.gps && k.is_multiple_of(10) {
                 let theta = 45f64.to_radians();
                 let ax = self.cfg.vehicle.antenna_x;
                 let g = self.frame.to_geodetic(Enu {
@@ -105,7 +108,7 @@ impl Rig {
                 };
                 self.ctl.on_gps(now, &reading);
             }
-            if feed.laser && k % 2 == 0 {
+            if feed.laser && k.is_multiple_of(2) {
                 let scan = Scan {
                     stamp: now,
                     angle_min: -135f64.to_radians(),

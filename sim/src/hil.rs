@@ -91,8 +91,9 @@ pub struct WireMap {
 
 /// Where the simulated scans go.
 enum LaserOut {
-    /// Straight onto the run's iceoryx2 service.
-    Iceoryx2(LaserPublisher),
+    /// Straight onto the run's iceoryx2 service (boxed: an iceoryx2 publisher is
+    /// over a kilobyte).
+    Iceoryx2(Box<LaserPublisher>),
     /// Served as a CoLa-A device over TCP (a driver puts them on the service).
     Cola(ColaServer),
     /// Nowhere: a physical laser is in the loop.
@@ -141,7 +142,9 @@ impl Wires {
         let (laser, driver, laser_text) = match &devices.laser {
             LaserSource::Iceoryx2 {} => (
                 LaserOut::Iceoryx2(
-                    LaserPublisher::new(&service).map_err(|e| laser_err(e.to_string()))?,
+                    LaserPublisher::new(&service)
+                        .map(Box::new)
+                        .map_err(|e| laser_err(e.to_string()))?,
                 ),
                 None,
                 "iceoryx2".to_owned(),
@@ -472,7 +475,7 @@ pub fn run_hil(
         if let Some(frame) = &out.laser {
             wires.publish(frame)?;
         }
-        if k % every == 0 {
+        if k.is_multiple_of(every) {
             status(&sim.snapshot());
         }
         if let Some(o) = outcome {
@@ -495,14 +498,13 @@ pub fn run_hil(
             });
             process = wanted;
         }
-        if k % 20 == 0 {
-            if let Some(c) = controller.as_deref_mut() {
-                // The run goes on until the car is safe, so the verdict can say how
-                // fast each ECU got there.
-                if let Ok(Some(exit)) = c.child.try_wait() {
-                    sim.controller_gone(format!("the controller exited ({exit})"));
-                }
-            }
+        // The run goes on until the car is safe, so the verdict can say how fast each
+        // ECU got there.
+        if k.is_multiple_of(20)
+            && let Some(c) = controller.as_deref_mut()
+            && let Ok(Some(exit)) = c.child.try_wait()
+        {
+            sim.controller_gone(format!("the controller exited ({exit})"));
         }
     }
 }

@@ -308,14 +308,13 @@ impl<B: Can> Sim<B> {
             }
             self.outputs.gps = faults.gps(now, gps.poll(now, &self.vehicle)?);
         }
-        if let Some(laser) = &mut self.laser {
-            if now + 1e-9 >= self.next_scan {
-                let v = &self.vehicle;
-                let scan = Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta));
-                self.outputs.laser = faults.laser(now, Some(scan));
-                self.next_scan =
-                    firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());
-            }
+        if let Some(laser) = &mut self.laser
+            && now + 1e-9 >= self.next_scan
+        {
+            let v = &self.vehicle;
+            let scan = Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta));
+            self.outputs.laser = faults.laser(now, Some(scan));
+            self.next_scan = firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());
         }
         if self
             .trajectory

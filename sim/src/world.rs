@@ -62,10 +62,8 @@ pub fn position_at(x0: f64, y0: f64, motion: &Option<Motion>, t: f64) -> (f64, f
         }) => {
             let mut legs: Vec<([f64; 2], [f64; 2])> =
                 points.windows(2).map(|w| (w[0], w[1])).collect();
-            if *cyclic {
-                if let (Some(last), Some(first)) = (points.last(), points.first()) {
-                    legs.push((*last, *first));
-                }
+            if *cyclic && let (Some(last), Some(first)) = (points.last(), points.first()) {
+                legs.push((*last, *first));
             }
             let lengths: Vec<f64> = legs
                 .iter()
@@ -335,13 +333,15 @@ mod tests {
 
     #[test]
     fn moving_obstacles_move() {
-        let mut s = Scenario::default();
-        s.obstacles = vec![Obstacle::Circle {
-            x: 0.0,
-            y: 10.0,
-            radius: 0.5,
-            motion: Some(Motion::Velocity { vx: 1.0, vy: 0.0 }),
-        }];
+        let s = Scenario {
+            obstacles: vec![Obstacle::Circle {
+                x: 0.0,
+                y: 10.0,
+                radius: 0.5,
+                motion: Some(Motion::Velocity { vx: 1.0, vy: 0.0 }),
+            }],
+            ..Scenario::default()
+        };
         let mut w = World::new(&s);
         assert!(
             w.cast_ray(5.0, 0.0, std::f64::consts::FRAC_PI_2, 20.0)

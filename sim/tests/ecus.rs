@@ -1,6 +1,9 @@
 //! The simulated ECUs as CAN nodes, in lockstep on the memory bus (the same bytes and
 //! E2E checks as on vcan0): step responses, the watchdog and the safe state.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used, clippy::panic)]
+
 use firmware_bridge::can::membus::{MemBus, MemEndpoint};
 use firmware_bridge::{CanPort, Received};
 use golf_car_can::{
@@ -48,7 +51,7 @@ impl Bench {
         while self.sim.next_tick() as f64 * dt <= until + 1e-9 {
             let k = self.sim.next_tick();
             let t = k as f64 * dt;
-            if k % ((0.01 / dt).round() as u64) == 0 {
+            if k.is_multiple_of((0.01 / dt).round() as u64) {
                 for m in control(t) {
                     self.ctl.send_message(&m).expect("send");
                 }

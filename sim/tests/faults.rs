@@ -1,6 +1,9 @@
 //! Fault injection (issue 16): the fault suite in SIL, the plan's validation, and the
 //! injected frames agreeing with what the controller's receiver rejected.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used)]
+
 use ugv_controller::config::FollowerKind;
 use ugv_sim::faults::plan::{PlanFile, kind_names};
 use ugv_sim::scenario::Scenario;

@@ -2,6 +2,9 @@
 //! through the same codecs. The paper's scenario reaches its goal without collision,
 //! a run is deterministic for a seed, and the safety stops work.
 
+// Helpers outside #[test] functions unwrap and panic as the tests do.
+#![allow(clippy::expect_used)]
+
 use ugv_controller::config::FollowerKind;
 use ugv_sim::Outcome;
 use ugv_sim::devices::gps::{FixEvent, FixKind};

@@ -19,8 +19,8 @@ use crate::scenario::Scenario;
 /// What plays an actuator ECU in the run.
 #[derive(Debug)]
 enum Twin {
-    /// The simulator's own ECU.
-    Simulated(EcuNode),
+    /// The simulator's own ECU (boxed: far larger than the physical one's state).
+    Simulated(Box<EcuNode>),
     /// A physical ECU (on a physical bus behind the gateway): the simulated twin stays
     /// silent and the vehicle follows the physical ECU's reports.
     Physical(Reported),
@@ -85,7 +85,7 @@ impl<B: Can> Station<B> {
         Station {
             kind,
             twin: match device {
-                EcuDevice::Simulated {} => Twin::Simulated(EcuNode::new(kind, scenario)),
+                EcuDevice::Simulated {} => Twin::Simulated(Box::new(EcuNode::new(kind, scenario))),
                 EcuDevice::Physical { .. } => Twin::Physical(Reported::default()),
             },
             port,
@@ -344,7 +344,7 @@ pub fn run_standalone<B: Can>(
         station.drain(now);
         station.step(now, dt);
         station.send_due(now, clock.now())?;
-        if k % every == 0 {
+        if k.is_multiple_of(every) {
             status(&snapshot(&station, now));
         }
         k += 1;
