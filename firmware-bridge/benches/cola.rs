@@ -29,28 +29,12 @@ fn now_ns() -> u64 {
         .unwrap_or(0)
 }
 
-/// An LMS111 scan: 541 beams over 270°, some no-returns and dropouts.
+/// An LMS111 scan (541 beams over 270°, some no-returns and dropouts) stamped now.
 fn frame() -> LaserFrame {
-    let mut f = LaserFrame {
-        angle_min: -2.356_194_5,
-        angle_increment: 0.008_726_646,
-        time_increment: 0.02 / 720.0,
-        scan_time: 0.02,
-        range_min: 0.5,
-        range_max: 20.0,
+    LaserFrame {
         stamp_ns: now_ns(),
-        ..LaserFrame::default()
-    };
-    let ranges: Vec<f32> = (0..541)
-        .map(|i| match i % 50 {
-            0 => f32::INFINITY,
-            1 => f32::NAN,
-            _ => 0.6 + (i % 190) as f32 * 0.1003,
-        })
-        .collect();
-    let intensities: Vec<f32> = (0..541).map(|i| (i % 200) as f32).collect();
-    let _ = f.set_beams(&ranges, &intensities);
-    f
+        ..LaserFrame::synthetic(0, 541)
+    }
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {

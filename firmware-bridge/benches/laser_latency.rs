@@ -22,25 +22,10 @@ fn now_ns() -> u64 {
         .unwrap_or(0)
 }
 
-fn frame() -> LaserFrame {
-    let mut f = LaserFrame {
-        angle_min: -2.356_194_5,
-        angle_increment: 0.008_726_646,
-        time_increment: 0.02 / 720.0,
-        scan_time: 0.02,
-        range_min: 0.5,
-        range_max: 20.0,
-        ..LaserFrame::default()
-    };
-    let ranges: Vec<f32> = (0..541).map(|i| 1.0 + (i % 190) as f32 * 0.1).collect();
-    let _ = f.set_beams(&ranges, &[100.0; 541]);
-    f
-}
-
 /// Child: publish `n` frames at `rate_hz` once the subscriber is connected.
 fn publisher(service: &str, n: u64, rate_hz: f64) -> Result<(), Box<dyn std::error::Error>> {
     let p = LaserPublisher::new(service)?;
-    let mut f = frame();
+    let mut f = LaserFrame::synthetic(0, 541);
     f.sequence = WARM_UP;
     while p.publish(&f)? == 0 {
         std::thread::sleep(Duration::from_millis(5));

@@ -30,6 +30,8 @@
 //!   threads and sockets around a [`Device`].
 //! - [`client`]: [`ColaClient`], the driver of a scanner (physical, or a
 //!   [`ColaServer`]).
+//! - [`driver`]: the driver loop, a [`ColaClient`]'s scans onto an iceoryx2 laser
+//!   service ([`driver::drive`]), for `ugv-sick` and the simulator.
 //!
 //! # Angles
 //!
@@ -117,6 +119,7 @@
 pub mod client;
 pub mod convert;
 pub mod device;
+pub mod driver;
 pub mod framing;
 pub mod message;
 pub mod scandata;

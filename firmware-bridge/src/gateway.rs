@@ -42,7 +42,7 @@ pub mod stats;
 use std::io;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -55,6 +55,8 @@ pub use stats::{DirectionStats, GatewayStats, LatencySummary, LocalCounts, Messa
 use log::ForwardLog;
 use socket::{GatewaySocket, ReadOutcome};
 use stats::DirectionCounters;
+
+use crate::sync::lock;
 
 /// How long a read waits before looking at the stop flag again.
 const READ_TIMEOUT: Duration = Duration::from_millis(100);
@@ -170,12 +172,6 @@ struct Shared {
     running: AtomicUsize,
     started: Instant,
     tx_give_up: Duration,
-}
-
-/// A poisoned lock only means another thread panicked while counting: the counts
-/// are still the best there are.
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 impl Shared {

@@ -273,6 +273,48 @@ impl LaserFrame {
     }
 }
 
+impl LaserFrame {
+    /// A made-up LMS111-like scan for tests and benchmarks, every field a function of
+    /// `sequence` and `beams` (clamped to `1..=MAX_BEAMS`): beams spread evenly over
+    /// 270° (0.5° steps at 541 beams), 50 Hz, range limits 0.5-20 m, stamped
+    /// `2026-05-04T14:00:00Z + sequence * 20 ms` (whole microseconds, as CoLa-A
+    /// carries). Every 9th beam is a no return (`INFINITY`) and the one after it a
+    /// dropout (`NAN`), shifting with the sequence; the others lie within
+    /// `[0.5, 20)` m with whole-number intensities of at most 255 (an 8-bit RSSI
+    /// channel carries them unchanged), 0 where there is no measurement.
+    pub fn synthetic(sequence: u64, beams: usize) -> LaserFrame {
+        let beams = beams.clamp(1, MAX_BEAMS);
+        let mut f = LaserFrame {
+            count: beams as u32,
+            sequence,
+            stamp_ns: 1_777_903_200_000_000_000 + sequence * 20_000_000,
+            angle_min: -135f32.to_radians(),
+            angle_increment: 270f32.to_radians() / (beams.max(2) - 1) as f32,
+            time_increment: 0.02 / 720.0,
+            scan_time: 0.02,
+            range_min: 0.5,
+            range_max: 20.0,
+            ..LaserFrame::default()
+        };
+        for (i, (r, q)) in f.ranges[..beams]
+            .iter_mut()
+            .zip(&mut f.intensities[..beams])
+            .enumerate()
+        {
+            (*r, *q) = match (i as u64 + sequence) % 9 {
+                0 => (f32::INFINITY, 0.0),
+                1 => (f32::NAN, 0.0),
+                k => {
+                    let range =
+                        0.5 + (sequence as f32 * 0.37 + i as f32 * 0.0113 + k as f32) % 19.5;
+                    (range, (2000.0 / range).round().min(255.0))
+                }
+            };
+        }
+        f
+    }
+}
+
 /// Headline numbers of one scan.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScanSummary {
@@ -367,6 +409,28 @@ mod tests {
         assert_eq!(j["ranges"], serde_json::json!([1.0, null, null, 25.0]));
         assert_eq!(j["intensities"].as_array().map(Vec::len), Some(4));
         assert_eq!(j["version"], 1);
+    }
+
+    #[test]
+    fn a_synthetic_frame_is_a_valid_lms111_scan_with_no_returns_and_dropouts() {
+        let f = LaserFrame::synthetic(3, 541);
+        f.validate().unwrap();
+        assert_eq!((f.sequence, f.len()), (3, 541));
+        assert!((f.angle_min.to_degrees() + 135.0).abs() < 1e-4);
+        assert!((f.angle_max().to_degrees() - 135.0).abs() < 1e-3);
+        assert!((f.angle_increment.to_degrees() - 0.5).abs() < 1e-6);
+        assert_eq!(f.stamp_ns % 1000, 0);
+        let s = f.summary();
+        assert_eq!((s.no_return, s.dropouts, s.valid), (60, 60, 421));
+        assert!(
+            f.intensities()
+                .iter()
+                .all(|q| q.fract() == 0.0 && *q <= 255.0)
+        );
+        assert!(LaserFrame::synthetic(3, 541).bit_eq(&f));
+        assert!(!LaserFrame::synthetic(4, 541).bit_eq(&f));
+        assert_eq!(LaserFrame::synthetic(0, 0).len(), 1);
+        assert_eq!(LaserFrame::synthetic(0, MAX_BEAMS + 5).len(), MAX_BEAMS);
     }
 
     #[test]

@@ -11,6 +11,7 @@
 //!   physical one, routed by the DBC's senders and receivers.
 //! - [`geodesy`]: WGS-84 conversions between the world (ENU) frame and latitude/longitude.
 //! - [`cli`]: bounded number parsers for the binaries' command lines.
+//! - [`sync`]: the poison-tolerant lock of the threads' shared counters and lists.
 
 pub mod can;
 pub mod cli;
@@ -20,6 +21,7 @@ pub mod gateway;
 pub mod geodesy;
 pub mod laser;
 pub mod nmea;
+pub mod sync;
 
 pub use can::{BridgeError, CanPort, Received};
 pub use geodesy::{Enu, Geodetic, LocalFrame};

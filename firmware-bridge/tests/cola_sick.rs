@@ -29,30 +29,7 @@ fn unique_service(test: &str) -> String {
 }
 
 fn make_frame(seq: u64) -> LaserFrame {
-    let mut f = LaserFrame {
-        sequence: seq,
-        stamp_ns: 1_777_903_200_000_000_000 + seq * 20_000_000,
-        angle_min: -2.356_194_5,
-        angle_increment: 0.008_726_646,
-        time_increment: 0.02 / 720.0,
-        scan_time: 0.02,
-        range_min: 0.5,
-        range_max: 20.0,
-        ..LaserFrame::default()
-    };
-    let ranges: Vec<f32> = (0..541)
-        .map(|i| match (i + seq as usize) % 11 {
-            0 => f32::INFINITY,
-            1 => f32::NAN,
-            k => 0.5 + ((i as f32) * 0.031 + k as f32 + seq as f32 * 0.1) % 19.0,
-        })
-        .collect();
-    let intensities: Vec<f32> = ranges
-        .iter()
-        .map(|r| if r.is_finite() { 100.0 } else { 0.0 })
-        .collect();
-    f.set_beams(&ranges, &intensities).unwrap();
-    f
+    LaserFrame::synthetic(seq, 541)
 }
 
 fn assert_same(got: &LaserFrame, sent: &LaserFrame) {

@@ -22,38 +22,11 @@ use firmware_bridge::laser::{LaserFrame, MAX_BEAMS};
 
 const WAIT: Duration = Duration::from_secs(20);
 
-/// A frame whose every field follows from its sequence number: `count` beams over
-/// 270°, inf and NaN beams among ranges of 0.5 to 20 m, integer intensities.
+/// A synthetic frame of `count` beams whose stamp has nanoseconds below the
+/// microsecond, which the telegram drops.
 fn make_frame(seq: u64, count: usize) -> LaserFrame {
-    let mut f = LaserFrame {
-        sequence: seq,
-        stamp_ns: 1_777_903_200_000_000_000 + seq * 20_000_000 + 123_456,
-        angle_min: -2.356_194_5,
-        angle_increment: 4.712_389 / (count.max(2) - 1) as f32,
-        time_increment: 0.02 / 720.0,
-        scan_time: 0.02,
-        range_min: 0.5,
-        range_max: 20.0,
-        ..LaserFrame::default()
-    };
-    let ranges: Vec<f32> = (0..count)
-        .map(|i| match (i as u64 + seq) % 9 {
-            0 => f32::INFINITY,
-            1 => f32::NAN,
-            k => 0.5 + (seq as f32 * 0.37 + i as f32 * 0.0113 + k as f32) % 19.5,
-        })
-        .collect();
-    let intensities: Vec<f32> = ranges
-        .iter()
-        .map(|r| {
-            if r.is_finite() {
-                (2000.0 / r).round().min(255.0)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    f.set_beams(&ranges, &intensities).unwrap();
+    let mut f = LaserFrame::synthetic(seq, count);
+    f.stamp_ns += 123_456;
     f
 }
 

@@ -1,12 +1,13 @@
-//! The laser wire over iceoryx2: in one process, across two processes (this test binary
-//! re-executed as a publisher, and the `ugv-laser-echo` binary as a subscriber), late
-//! subscribers and malformed frames. Every test uses its own service name.
+//! The laser wire over iceoryx2: in one process, across two processes (the
+//! `ugv-laser-synth` binary as a publisher, and the `ugv-laser-echo` binary as a
+//! subscriber), late subscribers and malformed frames. Every test uses its own service
+//! name.
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, ensure};
 use firmware_bridge::laser::{
     LaserError, LaserFrame, LaserPublisher, LaserSubscriber, SUBSCRIBER_BUFFER, service_name,
 };
@@ -15,8 +16,6 @@ use iceoryx2::prelude::*;
 
 /// Generous: a frame normally arrives in microseconds; this only bounds a broken test.
 const WAIT: Duration = Duration::from_secs(20);
-const CHILD_ENV: &str = "UGV_LASER_TEST_CHILD_SERVICE";
-const CRASH_ENV: &str = "UGV_LASER_TEST_CRASH_SERVICE";
 
 fn unique_service(test: &str) -> String {
     let nanos = SystemTime::now()
@@ -26,34 +25,15 @@ fn unique_service(test: &str) -> String {
     service_name(&format!("test-{}-{nanos}-{test}", std::process::id()))
 }
 
+/// Beam counts up to the maximum, varying with the sequence number.
+fn beams_of(seq: u64) -> usize {
+    [541, 1081, 181, 1][(seq % 4) as usize]
+}
+
 /// A frame whose every field follows from its sequence number, with inf and NaN beams,
 /// and a beam count that varies up to the maximum.
 fn make_frame(seq: u64) -> LaserFrame {
-    let count = [541usize, 1081, 181, 1][(seq % 4) as usize];
-    let mut f = LaserFrame {
-        sequence: seq,
-        stamp_ns: 1_777_903_200_000_000_000 + seq * 20_000_000,
-        angle_min: -2.356_194_5,
-        angle_increment: 4.712_389 / (count.max(2) - 1) as f32,
-        time_increment: 0.02 / 720.0,
-        scan_time: 0.02,
-        range_min: 0.5,
-        range_max: 20.0,
-        ..LaserFrame::default()
-    };
-    let ranges: Vec<f32> = (0..count)
-        .map(|i| match (i as u64 + seq) % 7 {
-            0 => f32::INFINITY,
-            1 => f32::NAN,
-            k => 0.5 + (seq as f32 * 0.37 + i as f32 * 0.011 + k as f32) % 19.0,
-        })
-        .collect();
-    let intensities: Vec<f32> = ranges
-        .iter()
-        .map(|r| if r.is_finite() { 1000.0 / r } else { 0.0 })
-        .collect();
-    let _ = f.set_beams(&ranges, &intensities);
-    f
+    LaserFrame::synthetic(seq, beams_of(seq))
 }
 
 fn check(frame: &LaserFrame, seq: u64) -> Result<()> {
@@ -204,8 +184,19 @@ fn a_bad_service_name_is_refused() {
     ));
 }
 
-/// Frames published by another process arrive in order and bit-identical. The child
-/// publishes in batches the parent asks for on its stdin, so no frame can overflow the
+/// `ugv-laser-synth` publishing `service` (each frame to reach exactly one subscriber
+/// when `expect_one`), its stdin and stdout piped.
+fn synth(service: &str, expect_one: bool) -> Result<std::process::Child> {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_ugv-laser-synth"));
+    cmd.arg(service);
+    if expect_one {
+        cmd.args(["--expect-subscribers", "1"]);
+    }
+    Ok(cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).spawn()?)
+}
+
+/// Frames published by another process arrive in order and bit-identical. The parent
+/// asks for them in batches on the publisher's stdin, so no frame can overflow the
 /// subscriber's buffer however slow the machine.
 #[test]
 fn frames_cross_processes_in_order_and_intact() -> Result<()> {
@@ -213,21 +204,16 @@ fn frames_cross_processes_in_order_and_intact() -> Result<()> {
     const BATCHES: u64 = 25;
     let service = unique_service("xproc");
     let sub = LaserSubscriber::new(&service)?;
-    let mut child = Command::new(std::env::current_exe()?)
-        .args([
-            "child_publisher",
-            "--exact",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(CHILD_ENV, &service)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()?;
+    let mut child = synth(&service, true)?;
     let mut to_child = child.stdin.take().context("child stdin")?;
+    let from_child = BufReader::new(child.stdout.take().context("child stdout")?);
+    // Drain the child's lines on a thread, so a full pipe never blocks it.
+    let lines = std::thread::spawn(move || from_child.lines().map_while(Result::ok).count());
     let result = (|| -> Result<()> {
         for b in 0..BATCHES {
-            writeln!(to_child, "{BATCH}")?;
+            for seq in b * BATCH..(b + 1) * BATCH {
+                writeln!(to_child, "{seq} {}", beams_of(seq))?;
+            }
             to_child.flush()?;
             for seq in b * BATCH..(b + 1) * BATCH {
                 let f = sub
@@ -241,33 +227,14 @@ fn frames_cross_processes_in_order_and_intact() -> Result<()> {
     })();
     drop(to_child);
     let status = child.wait()?;
+    let printed = lines
+        .join()
+        .map_err(|_| anyhow::anyhow!("line reader panicked"))?;
     result?;
     ensure!(status.success(), "child publisher failed: {status}");
+    // "ready", then one "published N" per frame.
+    ensure!(printed as u64 == 1 + BATCH * BATCHES, "{printed} lines");
     Ok(())
-}
-
-/// The child side of `frames_cross_processes_in_order_and_intact`: does nothing unless
-/// started by it.
-#[test]
-fn child_publisher() -> Result<()> {
-    let Ok(service) = std::env::var(CHILD_ENV) else {
-        return Ok(());
-    };
-    let publisher = LaserPublisher::new(&service)?;
-    let mut seq = 0;
-    for line in std::io::stdin().lock().lines() {
-        let line = line?;
-        if line.trim() == "quit" {
-            return Ok(());
-        }
-        let n: u64 = line.trim().parse().context("batch size")?;
-        for _ in 0..n {
-            let reached = publisher.publish(&make_frame(seq))?;
-            ensure!(reached == 1, "frame {seq} reached {reached} subscribers");
-            seq += 1;
-        }
-    }
-    bail!("stdin closed before quit")
 }
 
 /// `ugv-laser-echo --json` in its own process receives what this process publishes.
@@ -332,24 +299,18 @@ fn dead_nodes_of(pid: u32) -> Result<usize> {
 #[test]
 fn a_killed_publisher_is_cleaned_up_and_its_service_reused() -> Result<()> {
     let service = unique_service("crash");
-    let mut child = Command::new(std::env::current_exe()?)
-        .args([
-            "crashing_publisher",
-            "--exact",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(CRASH_ENV, &service)
-        .stdout(Stdio::piped())
-        .spawn()?;
-    let stdout = child.stdout.take().context("child stdout")?;
-    let ready = BufReader::new(stdout)
-        .lines()
-        .map_while(|l| l.ok())
-        .any(|l| l.contains("LASER-CHILD-READY"));
+    let mut child = synth(&service, false)?;
+    let mut to_child = child.stdin.take().context("child stdin")?;
+    let mut from_child = BufReader::new(child.stdout.take().context("child stdout")?).lines();
+    let mut wait_for = |want: &str| from_child.any(|l| l.is_ok_and(|l| l == want));
+    let published = wait_for("ready")
+        && writeln!(to_child, "1 541")
+            .and_then(|()| to_child.flush())
+            .is_ok()
+        && wait_for("published 1");
     child.kill()?;
     child.wait()?;
-    ensure!(ready, "the crashing publisher never got ready");
+    ensure!(published, "the publisher never published its frame");
 
     let sub = LaserSubscriber::new(&service)?;
     ensure!(
@@ -359,19 +320,4 @@ fn a_killed_publisher_is_cleaned_up_and_its_service_reused() -> Result<()> {
     let publisher = LaserPublisher::new(&service)?;
     publisher.publish(&make_frame(9))?;
     check(&sub.recv_timeout(WAIT)?.context("frame lost")?, 9)
-}
-
-/// The child side of `a_killed_publisher_is_cleaned_up_and_its_service_reused`: does
-/// nothing unless started by it; then publishes, says it is ready and waits to be killed.
-#[test]
-fn crashing_publisher() -> Result<()> {
-    let Ok(service) = std::env::var(CRASH_ENV) else {
-        return Ok(());
-    };
-    let publisher = LaserPublisher::new(&service)?;
-    publisher.publish(&make_frame(1))?;
-    println!("LASER-CHILD-READY");
-    std::io::stdout().flush()?;
-    std::thread::sleep(Duration::from_secs(60));
-    bail!("was not killed")
 }

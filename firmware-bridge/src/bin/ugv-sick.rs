@@ -17,13 +17,14 @@
 //! status 0. Errors name the scanner's address or the service.
 
 use std::process::ExitCode;
-use std::sync::mpsc::{Receiver, RecvTimeoutError, TryRecvError, channel};
+use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::Parser;
 use firmware_bridge::cli::{number_f32, seconds};
-use firmware_bridge::cola::{ClientConfig, ColaClient, ColaError, DecodeOptions};
+use firmware_bridge::cola::driver::{DriverConfig, DriverEvent, DriverStats, drive, retry};
+use firmware_bridge::cola::{ClientConfig, ColaClient, DecodeOptions};
 use firmware_bridge::laser::LaserPublisher;
 
 /// Publish a SICK scanner's scans (CoLa-A over TCP) on an iceoryx2 laser service.
@@ -70,43 +71,6 @@ struct Args {
     count: Option<u64>,
 }
 
-/// Counters between two report lines and in total.
-#[derive(Debug, Default)]
-struct Tally {
-    published: u64,
-    publish_errors: u64,
-    bad: u64,
-}
-
-/// What ended a wait: Ctrl-C, or the time passed.
-fn stopped(stop: &Receiver<()>, wait: Duration) -> bool {
-    match stop.recv_timeout(wait) {
-        Ok(()) | Err(RecvTimeoutError::Disconnected) => true,
-        Err(RecvTimeoutError::Timeout) => false,
-    }
-}
-
-/// Run `attempt` (a connect or reconnect) until it succeeds, once per second, unless
-/// `--no-reconnect`. `Ok(false)`: Ctrl-C while trying.
-fn retry(
-    args: &Args,
-    stop: &Receiver<()>,
-    mut attempt: impl FnMut() -> Result<(), ColaError>,
-) -> anyhow::Result<bool> {
-    loop {
-        match attempt() {
-            Ok(()) => return Ok(true),
-            Err(e) if args.no_reconnect => {
-                return Err(e).with_context(|| format!("scanner at {}", args.address));
-            }
-            Err(e) => tracing::warn!("scanner at {}: {e}; retrying in 1 s", args.address),
-        }
-        if stopped(stop, Duration::from_secs(1)) {
-            return Ok(false);
-        }
-    }
-}
-
 fn run(args: &Args) -> anyhow::Result<()> {
     if !(args.range_min.is_finite()
         && args.range_max.is_finite()
@@ -120,8 +84,6 @@ fn run(args: &Args) -> anyhow::Result<()> {
         );
     }
     let timeout = args.connect_timeout;
-    let frame_timeout = args.frame_timeout;
-    let report_interval = args.report_interval;
     let config = ClientConfig {
         connect_timeout: timeout,
         reply_timeout: timeout,
@@ -146,14 +108,19 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let publisher = LaserPublisher::new(&args.service)
         .with_context(|| format!("opening the laser service {}", args.service))?;
 
-    let mut connected = None;
-    let attempt =
-        || ColaClient::connect(&args.address, config.clone()).map(|c| connected = Some(c));
-    if !retry(args, &stop, attempt)? {
-        return Ok(());
-    }
-    let Some(mut client) = connected else {
-        bail!("scanner at {}: not connected", args.address);
+    let scanner = || format!("scanner at {}", args.address);
+    let connect = || ColaClient::connect(&args.address, config.clone());
+    let mut client = if args.no_reconnect {
+        connect().with_context(scanner)?
+    } else {
+        let mut connected = None;
+        let attempt = || connect().map(|c| connected = Some(c));
+        if !retry(&stop, attempt, |e| {
+            tracing::warn!("{}: {e}; retrying in 1 s", scanner())
+        }) {
+            return Ok(());
+        }
+        connected.with_context(|| format!("{}: not connected", scanner()))?
     };
     tracing::info!(
         address = %args.address,
@@ -163,95 +130,63 @@ fn run(args: &Args) -> anyhow::Result<()> {
         "publishing scans"
     );
 
-    let mut total = Tally::default();
-    let mut window = Tally::default();
-    let mut window_start = Instant::now();
-    let mut last_frame = Instant::now();
-    let mut silent_warned = false;
-    let slice = Duration::from_millis(250).min(frame_timeout);
-    loop {
-        match stop.try_recv() {
-            Ok(()) | Err(TryRecvError::Disconnected) => break,
-            Err(TryRecvError::Empty) => {}
-        }
-        match client.next_frame(slice) {
-            Ok(Some(frame)) => {
-                last_frame = Instant::now();
-                silent_warned = false;
-                match publisher.publish(&frame) {
-                    Ok(_) => {
-                        total.published += 1;
-                        window.published += 1;
-                    }
-                    Err(e) => {
-                        total.publish_errors += 1;
-                        window.publish_errors += 1;
-                        if total.publish_errors <= 10 || total.publish_errors.is_power_of_two() {
-                            tracing::warn!(
-                                "scan {} not published on {} ({} so far): {e}",
-                                frame.sequence,
-                                args.service,
-                                total.publish_errors
-                            );
-                        }
-                    }
-                }
-                if args.count.is_some_and(|n| total.published >= n) {
-                    break;
-                }
-            }
-            Ok(None) => {
-                if !silent_warned && last_frame.elapsed() >= frame_timeout {
-                    silent_warned = true;
+    let driver = DriverConfig {
+        poll: Duration::from_millis(250).min(args.frame_timeout),
+        reconnect: !args.no_reconnect,
+        frame_timeout: args.frame_timeout,
+        count: args.count,
+    };
+    // Published scans at the start of the report window.
+    let mut window = (Instant::now(), 0u64);
+    let watch = |event: &DriverEvent<'_>, stats: &DriverStats| {
+        match event {
+            DriverEvent::PublishFailed { sequence, error } => {
+                let n = stats.publish_errors;
+                if n <= 10 || n.is_power_of_two() {
                     tracing::warn!(
-                        "no scan from {} for {:.1} s",
-                        args.address,
-                        last_frame.elapsed().as_secs_f64()
+                        "scan {sequence} not published on {} ({n} so far): {error}",
+                        args.service
                     );
                 }
             }
-            Err(e @ (ColaError::ConnectionLost { .. } | ColaError::Io { .. })) => {
-                if args.no_reconnect {
-                    return Err(e).with_context(|| format!("scanner at {}", args.address));
-                }
-                tracing::warn!("{e}; reconnecting");
-                if !retry(args, &stop, || client.reconnect())? {
-                    break;
-                }
-                last_frame = Instant::now();
+            DriverEvent::Silent { since } => {
+                tracing::warn!(
+                    "no scan from {} for {:.1} s",
+                    args.address,
+                    since.as_secs_f64()
+                );
             }
-            Err(e) => {
-                // One bad telegram: say why, go on with the next.
-                total.bad += 1;
-                window.bad += 1;
-                if total.bad <= 10 || total.bad.is_power_of_two() {
-                    tracing::warn!(
-                        "scanner at {}: bad scan ({} so far): {e}",
-                        args.address,
-                        total.bad
-                    );
+            DriverEvent::Bad(e) => {
+                // One bad telegram: say why; the loop goes on with the next.
+                let n = stats.bad;
+                if n <= 10 || n.is_power_of_two() {
+                    tracing::warn!("{}: bad scan ({n} so far): {e}", scanner());
                 }
             }
+            DriverEvent::Lost(e) => tracing::warn!("{e}; reconnecting"),
+            DriverEvent::ReconnectFailed(e) => {
+                tracing::warn!("{}: {e}; retrying in 1 s", scanner());
+            }
+            DriverEvent::Published { .. } | DriverEvent::Idle | DriverEvent::Reconnected => {}
         }
-        let elapsed = window_start.elapsed();
-        if elapsed >= report_interval {
-            let stats = client.stats();
+        let elapsed = window.0.elapsed();
+        if elapsed >= args.report_interval {
             tracing::info!(
                 "{:.1} scans/s, {} published, {} lost by the scanner or network, {} bad telegrams, {} publish errors",
-                window.published as f64 / elapsed.as_secs_f64(),
-                total.published,
-                stats.lost_scans,
-                total.bad,
-                total.publish_errors,
+                (stats.published - window.1) as f64 / elapsed.as_secs_f64(),
+                stats.published,
+                stats.client.lost_scans,
+                stats.bad,
+                stats.publish_errors,
             );
-            window = Tally::default();
-            window_start = Instant::now();
+            window = (Instant::now(), stats.published);
         }
-    }
+    };
+    let stats = drive(&mut client, &publisher, &driver, &stop, watch).with_context(scanner)?;
     tracing::info!(
-        published = total.published,
-        lost = client.stats().lost_scans,
-        bad = total.bad,
+        published = stats.published,
+        lost = stats.client.lost_scans,
+        bad = stats.bad,
         "stopped"
     );
     Ok(())

@@ -8,6 +8,8 @@ use std::sync::{Arc, Mutex};
 
 use embedded_can::{ErrorKind, Frame, Id};
 
+use crate::sync::lock;
+
 /// A classic CAN data or remote frame.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct MemFrame {
@@ -94,7 +96,7 @@ impl MemBus {
 
     /// A new node on the bus.
     pub fn endpoint(&self) -> MemEndpoint {
-        let mut hub = self.hub.lock().unwrap_or_else(|p| p.into_inner());
+        let mut hub = lock(&self.hub);
         hub.inboxes.push(VecDeque::new());
         MemEndpoint {
             hub: Arc::clone(&self.hub),
@@ -115,7 +117,7 @@ impl embedded_can::nb::Can for MemEndpoint {
     type Error = MemBusError;
 
     fn transmit(&mut self, frame: &MemFrame) -> nb::Result<Option<MemFrame>, MemBusError> {
-        let mut hub = self.hub.lock().unwrap_or_else(|p| p.into_inner());
+        let mut hub = lock(&self.hub);
         for (i, inbox) in hub.inboxes.iter_mut().enumerate() {
             if i != self.index {
                 inbox.push_back(frame.clone());
@@ -125,7 +127,7 @@ impl embedded_can::nb::Can for MemEndpoint {
     }
 
     fn receive(&mut self) -> nb::Result<MemFrame, MemBusError> {
-        let mut hub = self.hub.lock().unwrap_or_else(|p| p.into_inner());
+        let mut hub = lock(&self.hub);
         hub.inboxes
             .get_mut(self.index)
             .and_then(VecDeque::pop_front)

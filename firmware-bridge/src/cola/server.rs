@@ -28,7 +28,7 @@ use std::io::{Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -38,6 +38,7 @@ use super::device::{Device, DeviceConfig, SessionId};
 use super::framing::{ETX, STX};
 use super::scandata::ScanKind;
 use crate::laser::LaserFrame;
+use crate::sync::lock;
 
 /// What the emulated scanner is and how it behaves.
 #[derive(Clone, Debug, PartialEq)]
@@ -223,12 +224,6 @@ struct Shared {
     clients: Mutex<Vec<ClientHandle>>,
     /// Threads of clients that went away, joined later.
     retired: Mutex<Vec<JoinHandle<()>>>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    // A panicking holder cannot leave these structures half-updated in a way that
-    // matters (pointer swaps and list edits), so a poisoned lock is used as is.
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// A SICK scanner on TCP; see the [module documentation](self).

@@ -2,16 +2,21 @@
 //! CoLa-A server, or a physical SICK): on a thread, it reads the scanner's scans
 //! with [`ColaClient`] and publishes them on the run's iceoryx2 service as
 //! [`LaserFrame`]s, so the controller gets the same frames either way. A lost
-//! connection is retried once a second.
+//! connection is retried once a second. The loop is `ugv-sick`'s
+//! ([`firmware_bridge::cola::driver`]); this module runs it on a thread and keeps its
+//! counts for the verdict.
+//!
+//! [`LaserFrame`]: firmware_bridge::laser::LaserFrame
 
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
+use firmware_bridge::cola::driver::{DriverConfig, DriverEvent, DriverStats, drive};
 use firmware_bridge::cola::{ClientConfig, ColaClient, ColaError, DecodeOptions};
 use firmware_bridge::laser::LaserPublisher;
+use firmware_bridge::sync::lock;
 use serde::Serialize;
 
 /// What the driver did so far.
@@ -34,13 +39,10 @@ pub struct ColaDriverStats {
 /// The driver's thread; stopped and joined on drop.
 #[derive(Debug)]
 pub struct ColaDriverThread {
-    stop: Arc<AtomicBool>,
+    /// Dropped to stop the loop.
+    stop: Option<Sender<()>>,
     stats: Arc<Mutex<ColaDriverStats>>,
     thread: Option<JoinHandle<()>>,
-}
-
-fn lock(m: &Mutex<ColaDriverStats>) -> std::sync::MutexGuard<'_, ColaDriverStats> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 impl ColaDriverThread {
@@ -60,40 +62,29 @@ impl ColaDriverThread {
                 ..ClientConfig::default()
             },
         )?;
-        let stop = Arc::new(AtomicBool::new(false));
+        let (stop, stopped) = channel();
         let stats = Arc::new(Mutex::new(ColaDriverStats {
             device: client.device_ident().name.clone(),
             ..ColaDriverStats::default()
         }));
-        let (flag, shared) = (Arc::clone(&stop), Arc::clone(&stats));
+        let shared = Arc::clone(&stats);
         let thread = std::thread::Builder::new()
             .name("cola-driver".to_owned())
             .spawn(move || {
-                while !flag.load(Ordering::Relaxed) {
-                    let result = match client.next_frame(Duration::from_millis(100)) {
-                        Ok(Some(frame)) => publisher
-                            .publish(&frame)
-                            .map(|_| true)
-                            .map_err(|e| e.to_string()),
-                        Ok(None) => Ok(false),
-                        Err(ColaError::ConnectionLost { .. } | ColaError::Io { .. }) => {
-                            std::thread::sleep(Duration::from_secs(1));
-                            client
-                                .reconnect()
-                                .map(|()| false)
-                                .map_err(|e| e.to_string())
-                        }
-                        Err(e) => Err(e.to_string()),
-                    };
-                    let c = client.stats();
+                let watch = |event: &DriverEvent<'_>, counts: &DriverStats| {
                     let mut s = lock(&shared);
-                    s.frames += u64::from(result == Ok(true));
-                    s.lost_scans = c.lost_scans;
-                    s.bad_telegrams = c.bad_telegrams;
-                    s.connects = c.connects;
-                    if let Err(e) = result {
-                        s.last_error = Some(e);
+                    s.frames = counts.published;
+                    s.lost_scans = counts.client.lost_scans;
+                    s.bad_telegrams = counts.client.bad_telegrams;
+                    s.connects = counts.client.connects;
+                    if let Some(e) = event.error() {
+                        s.last_error = Some(e.to_string());
                     }
+                };
+                let config = DriverConfig::default();
+                // With reconnect on, only the stop ends the loop.
+                if let Err(e) = drive(&mut client, &publisher, &config, &stopped, watch) {
+                    lock(&shared).last_error = Some(e.to_string());
                 }
             })
             .map_err(|source| ColaError::Io {
@@ -101,7 +92,7 @@ impl ColaDriverThread {
                 source,
             })?;
         Ok(ColaDriverThread {
-            stop,
+            stop: Some(stop),
             stats,
             thread: Some(thread),
         })
@@ -114,7 +105,7 @@ impl ColaDriverThread {
 
 impl Drop for ColaDriverThread {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
+        self.stop.take();
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
