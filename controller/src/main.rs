@@ -126,6 +126,9 @@ enum AnfisCommand {
 }
 
 fn main() -> ExitCode {
+    // The tracing events of the libraries (firmware-bridge's) on stderr: warnings, or
+    // what RUST_LOG asks for (firmware_bridge=debug: each NMEA sentence rejected).
+    firmware_bridge::cli::init_logging("warn");
     match run(Cli::parse()) {
         Ok(code) => code,
         Err(e) => {

@@ -1,5 +1,7 @@
-//! Bounded number parsers for the command lines of the workspace's binaries, as clap
-//! value parsers: a value outside its range is refused at parse time with the range
+//! What the workspace's binaries share on their command lines: their log set-up
+//! ([`init_logging`]), and bounded number parsers as clap value parsers.
+//!
+//! A number outside its range is refused at parse time with the range
 //! in the message, clap names the argument (`invalid value '1e300' for
 //! '--connect-timeout <SECONDS>': must be within 0.001..=3600 seconds`), and
 //! nothing downstream meets a number that makes it panic (`Duration::from_secs_f64`
@@ -20,6 +22,20 @@
 //! ```
 
 use std::time::Duration;
+
+use tracing_subscriber::EnvFilter;
+
+/// Write the `tracing` events of the binary and of the libraries it runs
+/// (firmware-bridge's warnings among them) to stderr, at the levels `RUST_LOG` names
+/// (`RUST_LOG=info`, `RUST_LOG=firmware_bridge=debug`), else at `default` and above.
+/// Once per process: later calls keep the first set-up.
+pub fn init_logging(default: &str) {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
+    let _ = tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(filter)
+        .try_init();
+}
 
 /// A number within `min..=max` (finite), `unit` named in the error.
 pub fn number(

@@ -216,6 +216,10 @@ struct RunArgs {
 }
 
 fn main() -> ExitCode {
+    // The tracing events of the libraries (firmware-bridge's) on stderr: warnings (the
+    // CoLa-A server, the gateways), or what RUST_LOG asks for (info: the lines the
+    // controller writes on the GPS port).
+    firmware_bridge::cli::init_logging("warn");
     match run(Cli::parse()) {
         Ok(code) => code,
         Err(e) => {

@@ -147,13 +147,7 @@ fn main() -> ExitCode {
     let args = Args::parse();
     // Warnings of the gateway (frames given up, receive errors) on stderr; RUST_LOG
     // for more.
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .init();
+    firmware_bridge::cli::init_logging("warn");
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -194,13 +194,8 @@ fn run(args: &Args) -> anyhow::Result<()> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
+    // Its scans/s report lines are info; RUST_LOG=warn for only the trouble.
+    firmware_bridge::cli::init_logging("info");
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
