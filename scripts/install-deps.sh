@@ -121,8 +121,16 @@ if ((${#missing_pip[@]})); then
 fi
 
 # ---------------------------------------------------------------- cargo tools
-# cargo-nextest runs the tests (one process per test, filter expressions for vcan_*);
-# the machine image ships it, a bare Rust install does not.
+# clippy and rustfmt: scripts/test.sh checks lints and formatting; rustup's minimal
+# profile has neither.
+if command -v rustup >/dev/null 2>&1; then
+    installed=$(rustup component list --installed)
+    for component in clippy rustfmt; do
+        grep -q "^$component" <<<"$installed" || rustup component add "$component"
+    done
+fi
+# cargo-nextest runs the tests (one process per test, the vcan test group; 0.9.133 or
+# later, .config/nextest.toml); the machine image ships it, a bare Rust install does not.
 if ! command -v cargo-nextest >/dev/null 2>&1 && [[ ! -x $HOME/.cargo/bin/cargo-nextest ]]; then
     echo "install-deps: cargo install cargo-nextest"
     cargo install --locked cargo-nextest

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The test command (README.md): installs what the tests need, builds the workspace and
-# runs every test. Tests that need a real vcan (test binaries named vcan_*) run natively
+# The test command (README.md): installs what the tests need, builds the workspace,
+# checks lints and formatting, and runs every test. Tests that need a real vcan (the
+# nextest group vcan of .config/nextest.toml: test binaries named vcan_*) run natively
 # when this kernel has vcan and we may create interfaces, otherwise inside a throwaway
 # VM (vcan-setup vm) whose stock kernel has CAN. Either way they run: a missing vcan
 # fails them loudly, it never skips them.
@@ -16,13 +17,18 @@ cargo build --workspace --all-targets --locked
 cargo build --workspace --release --locked
 export UGV_BIN_DIR="$PWD/target/release"
 
-echo "== tests on the host (everything but vcan_*)"
-cargo nextest run --workspace --locked --no-fail-fast -E 'not binary(/^vcan_/)'
+echo "== lints and formatting"
+cargo clippy --workspace --all-targets --locked -- -D warnings
+cargo fmt --all --check
 
-echo "== tests on a real vcan (vcan_*)"
-# One at a time: inside an emulated VM two vCPUs are shared by the simulator, the
-# controller and the test processes, and the real-time runs keep 100 ms watchdogs.
-vcan_tests=(cargo nextest run --workspace --locked --no-fail-fast --test-threads 1 -E 'binary(/^vcan_/)')
+echo "== tests on the host (everything but the vcan group)"
+cargo nextest run --workspace --locked --no-fail-fast -E 'not group(vcan)'
+
+echo "== tests on a real vcan (the vcan group: vcan_*)"
+# One at a time (the group's max-threads in .config/nextest.toml): inside an emulated
+# VM two vCPUs are shared by the simulator, the controller and the test processes, and
+# the real-time runs keep 100 ms watchdogs.
+vcan_tests=(cargo nextest run --workspace --locked --no-fail-fast -E 'group(vcan)')
 if target/debug/vcan-setup status >/dev/null 2>&1 && [[ $(id -u) -eq 0 ]]; then
     "${vcan_tests[@]}"
 else
