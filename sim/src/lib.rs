@@ -8,6 +8,7 @@ pub mod hil;
 pub mod isolate;
 /// Ticks on absolute deadlines and lockstep (shared with the controller).
 pub use firmware_bridge::clock;
+pub mod busload;
 pub mod devices;
 pub mod ecu;
 pub mod faults;

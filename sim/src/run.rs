@@ -11,6 +11,7 @@ use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
 use crate::devices::laser::{LaserDevice, LaserDeviceError};
 use crate::devices::map::EcuDevice;
 use crate::ecu::EcuKind;
+use crate::busload::{BusLoad, BusLoadReport};
 use crate::ecu::station::Station;
 use crate::faults::{FaultRecord, Injector, Node, ProcessFault};
 use crate::scenario::Scenario;
@@ -143,6 +144,10 @@ pub struct Sim<B> {
     wind_down: Option<WindDown>,
     /// The scenario's fault plan, applied at the wires.
     faults: Injector,
+    /// Frames on the bus against its bit rate (counted at the steering station,
+    /// which sees every frame but its own, and its own).
+    bus: BusLoad,
+    bus_frames_seen: u64,
 }
 
 /// How long the run goes on after the controller went away, waiting for both ECUs'
@@ -220,6 +225,8 @@ impl<B: Can> Sim<B> {
             trajectory: vec![(0.0, vehicle)],
             wind_down: None,
             faults: Injector::new(Vec::new(), 0),
+            bus: BusLoad::new(golf_car_can::NETWORK.baudrate),
+            bus_frames_seen: 0,
             scenario,
         }
     }
@@ -300,6 +307,9 @@ impl<B: Can> Sim<B> {
                 self.steering.send_raw(id, &[0xff; 8])?;
             }
         }
+        let seen = self.steering.bus_frames();
+        self.bus.step(now, seen - self.bus_frames_seen);
+        self.bus_frames_seen = seen;
         if let Some(gps) = &mut self.gps {
             if !faults.is_empty() {
                 let (fix, (east, north)) = faults.gps_receiver(now);
@@ -475,6 +485,8 @@ pub struct RunReport {
     /// reached its safe state.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub faults: Vec<FaultRecord>,
+    /// The bus's load against the DBC's bit rate (worst-case stuffing).
+    pub bus_load: BusLoadReport,
 }
 
 impl<B: Can> Sim<B> {
@@ -496,6 +508,7 @@ impl<B: Can> Sim<B> {
             tick_lateness: self.tick_lateness(),
             safe_state: self.safe_state(),
             faults: self.fault_records(),
+            bus_load: self.bus.report(),
         }
     }
 }

@@ -109,18 +109,44 @@ impl Verdict {
                 scenario.success.min_clearance
             ));
         }
-        // A stop the fault plan caused (the controller killed) is what it tests.
+        // A stop the fault plan caused (the controller killed) is what it tests, and a
+        // controller that ended its mission at the goal (where the run does not end at
+        // the goal) arrived.
         let planned_stop = !scenario.success.reach_goal
-            && report
+            && (report
                 .faults
                 .iter()
-                .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill);
+                .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill)
+                || report.distance_to_goal <= scenario.goal.tolerance);
         if let Outcome::Stopped { reason, .. } = &report.outcome
             && !planned_stop
         {
             failures.push(format!("stopped: {reason}"));
         }
-        failures.extend(crate::faults::inject::unmet(&scenario.expect, &report.faults));
+        failures.extend(crate::faults::inject::unmet(
+            &scenario.expect,
+            &report.faults,
+            report.safe_state.as_ref().map(|s| s.noticed_s),
+        ));
+        let load = &report.bus_load;
+        let overloaded = load.peak_pct > 100.0;
+        if overloaded != scenario.expect.bus_overloaded {
+            failures.push(if overloaded {
+                format!(
+                    "the bus would be overloaded: {:.0} % of {} kbit/s over the {:.0} ms to {:.2} s",
+                    load.peak_pct,
+                    load.bit_rate / 1000,
+                    crate::busload::PEAK_WINDOW_S * 1e3,
+                    load.peak_at_s
+                )
+            } else {
+                format!(
+                    "expected an overloaded bus, its peak load is {:.0} % of {} kbit/s",
+                    load.peak_pct,
+                    load.bit_rate / 1000
+                )
+            });
+        }
         if let Some(s) = &report.safe_state {
             for (name, e) in [("steering", &s.steering), ("throttle", &s.throttle)] {
                 if !e.within_bound {

@@ -75,6 +75,9 @@ pub struct Station<B> {
     /// message (receiving).
     delayed_tx: VecDeque<(f64, u16, Vec<u8>)>,
     delayed_rx: VecDeque<(f64, GolfCarMessage)>,
+    /// Frames received from the bus (any, accepted or not), and raw frames sent.
+    received: u64,
+    raw_sent: u64,
     /// The last payload sent per ID (an injected repeated counter sends it again).
     last_sent: HashMap<u16, Payload>,
 }
@@ -97,6 +100,8 @@ impl<B: Can> Station<B> {
             delayed_tx: VecDeque::new(),
             delayed_rx: VecDeque::new(),
             last_sent: HashMap::new(),
+            received: 0,
+            raw_sent: 0,
         }
     }
 
@@ -115,6 +120,9 @@ impl<B: Can> Station<B> {
             }
         }
         while let Some(r) = self.port.try_recv() {
+            if !matches!(r, Received::BusError(_)) {
+                self.received += 1;
+            }
             if let Received::Message(m) = r {
                 match rx(&m) {
                     RxFault::Pass => self.handle(now, &m),
@@ -219,7 +227,14 @@ impl<B: Can> Station<B> {
 
     /// Send bytes as they are from this station's endpoint (a babbling node).
     pub fn send_raw(&mut self, id: u16, bytes: &[u8]) -> Result<(), BridgeError> {
-        self.port.send_bytes(id, bytes)
+        self.port.send_bytes(id, bytes)?;
+        self.raw_sent += 1;
+        Ok(())
+    }
+
+    /// Every frame this station has seen cross the bus: received, and sent.
+    pub fn bus_frames(&self) -> u64 {
+        self.received + self.sent + self.raw_sent
     }
 
     /// Each entry into the safe state (reported disabled after being enabled):

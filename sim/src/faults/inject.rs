@@ -526,6 +526,8 @@ impl Injector {
                         detection_ms: None,
                         steering_safe_ms: None,
                         throttle_safe_ms: None,
+                        steering_trip_ms: None,
+                        throttle_trip_ms: None,
                         reactions: Vec::new(),
                     };
                 };
@@ -536,6 +538,13 @@ impl Injector {
                         .map(|(t, c)| (*t, *c))
                 };
                 let (s, t) = (after(steering), after(throttle));
+                // Entries for a fault (not a commanded disable, as at the mission's end).
+                let tripped = |entries: &[(f64, Option<Cause>)]| {
+                    entries
+                        .iter()
+                        .find(|(at, c)| *at + 1e-9 >= start && c.is_some())
+                        .map(|(at, _)| (at - start) * 1e3)
+                };
                 let mut candidates: Vec<(f64, String)> = self
                     .reactions
                     .iter()
@@ -569,6 +578,8 @@ impl Injector {
                     detected_by: first.map(|x| x.1),
                     steering_safe_ms: s.map(|x| (x.0 - start) * 1e3),
                     throttle_safe_ms: t.map(|x| (x.0 - start) * 1e3),
+                    steering_trip_ms: tripped(steering),
+                    throttle_trip_ms: tripped(throttle),
                     reactions,
                 }
             })
@@ -595,13 +606,21 @@ pub struct FaultRecord {
     /// From the fault's start to each ECU's next entry into its safe state, ms.
     pub steering_safe_ms: Option<f64>,
     pub throttle_safe_ms: Option<f64>,
+    /// The same for an entry with a fault (a trip), not a commanded disable.
+    pub steering_trip_ms: Option<f64>,
+    pub throttle_trip_ms: Option<f64>,
     /// Every reaction from its start on, in order, with its time after the start.
     pub reactions: Vec<String>,
 }
 
 /// The expectations `expect` that the injected faults `records` did not meet, one
-/// failure line each.
-pub fn unmet(expect: &super::Expectations, records: &[FaultRecord]) -> Vec<String> {
+/// failure line each. `controller_gone_s`: when the controller went away (after it,
+/// the ECUs trip by design: a ridden-out fault is judged up to then).
+pub fn unmet(
+    expect: &super::Expectations,
+    records: &[FaultRecord],
+    controller_gone_s: Option<f64>,
+) -> Vec<String> {
     let mut out = Vec::new();
     for (i, r) in records.iter().enumerate() {
         let name = format!("faults[{i}] {}", r.fault.kind.name());
@@ -634,9 +653,9 @@ pub fn unmet(expect: &super::Expectations, records: &[FaultRecord]) -> Vec<Strin
                 }
             ));
         }
-        for (ecu, ms) in [
-            ("steering", r.steering_safe_ms),
-            ("throttle", r.throttle_safe_ms),
+        for (ecu, ms, trip_ms) in [
+            ("steering", r.steering_safe_ms, r.steering_trip_ms),
+            ("throttle", r.throttle_safe_ms, r.throttle_trip_ms),
         ] {
             if let Some(limit) = expect.safe_within_s {
                 match ms {
@@ -650,11 +669,12 @@ pub fn unmet(expect: &super::Expectations, records: &[FaultRecord]) -> Vec<Strin
                     )),
                 }
             }
+            let before_gone = |ms: &f64| controller_gone_s.is_none_or(|g| start + ms / 1e3 < g);
             if expect.ecus_stay_enabled
-                && let Some(ms) = ms
+                && let Some(ms) = trip_ms.filter(before_gone)
             {
                 out.push(format!(
-                    "{name}: the {ecu} ECU entered its safe state {ms:.0} ms after the fault, which was to be ridden out"
+                    "{name}: the {ecu} ECU tripped to its safe state {ms:.0} ms after the fault, which was to be ridden out"
                 ));
             }
         }

@@ -678,6 +678,9 @@ pub struct Expectations {
     pub safe_within_s: Option<f64>,
     /// The faults are to be ridden out: neither ECU may enter its safe state.
     pub ecus_stay_enabled: bool,
+    /// The schedule overloads the bus: its peak load must exceed the DBC's bit rate
+    /// (without this, an overloaded bus fails the run).
+    pub bus_overloaded: bool,
 }
 
 impl Expectations {
