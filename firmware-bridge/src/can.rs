@@ -110,7 +110,10 @@ where
 
     /// Encode `message` and protect it with its ID's next counter and the CRC, without
     /// sending it (fault injection alters the payload, or leaves a counter out).
-    pub fn seal_message(&mut self, message: &GolfCarMessage) -> Result<(u16, Payload), BridgeError> {
+    pub fn seal_message(
+        &mut self,
+        message: &GolfCarMessage,
+    ) -> Result<(u16, Payload), BridgeError> {
         let id = message.id();
         let data = message.encode().map_err(|source| BridgeError::Encode {
             message: message.name(),

@@ -15,11 +15,12 @@ use firmware_bridge::{BridgeError, CanPort, Received};
 use golf_car_can::GolfCarMessage;
 use socketcan::CanSocket;
 
-use crate::faults::ProcessFault;
 use crate::devices::cola_driver::{ColaDriverStats, ColaDriverThread};
 use crate::devices::gps::{GpsError, GpsPort};
 use crate::devices::laser::LaserProfile;
 use crate::devices::map::{ControllerSite, GpsOutput, LaserSource};
+use crate::faults::ProcessFault;
+use crate::mode::Mode;
 use firmware_bridge::cola::{ColaServer, DecodeOptions, ServerConfig};
 use serde::Serialize;
 use ugv_controller::trace::FixTiming;
@@ -670,7 +671,7 @@ pub fn run_scenario(
                 time: 0.0,
                 reason: "stopped by signal".to_owned(),
             };
-            let verdict = Verdict::judge("hil", sc, sim.report(outcome.clone()), None);
+            let verdict = Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), None);
             return Ok((verdict, outcome));
         }
     }
@@ -715,7 +716,7 @@ pub fn run_scenario(
             "the controller wrote {lines} lines to the GPS port (last: {last:?})"
         ));
     }
-    let mut verdict = Verdict::judge("hil", sc, sim.report(outcome.clone()), trace.as_ref());
+    let mut verdict = Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), trace.as_ref());
     verdict.fix_latency = trace.as_ref().and_then(|t| {
         let epoch = sc.sim.epoch.unix_s();
         fix_latency(&t.fix_timing, epoch, started_ns)

@@ -7,11 +7,11 @@ use firmware_bridge::{BridgeError, CanPort};
 use golf_car_can::{CanMessage, E2eStats};
 use serde::Serialize;
 
+use crate::busload::{BusLoad, BusLoadReport};
 use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
 use crate::devices::laser::{LaserDevice, LaserDeviceError};
 use crate::devices::map::EcuDevice;
 use crate::ecu::EcuKind;
-use crate::busload::{BusLoad, BusLoadReport};
 use crate::ecu::station::Station;
 use crate::faults::{FaultRecord, Injector, Node, ProcessFault};
 use crate::scenario::Scenario;

@@ -11,8 +11,8 @@ use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError};
 use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
 use ugv_controller::trace::Trace;
 
-use crate::record::{RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo};
 use crate::faults::ProcessFault;
+use crate::record::{RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo};
 use crate::run::{Outcome, Sim, SimError};
 use crate::scenario::Scenario;
 

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use ugv_controller::config::ControllerConfig;
 
 use crate::mission::controller_config;
+use crate::mode::Mode;
 use crate::scenario::Scenario;
 use crate::sil::{Hook, run_sil_recorded};
 use crate::sweep::{Percentiles, Plan, PlanInfo, Shard, wilson95};
@@ -128,7 +129,7 @@ pub fn sil_runner_recording<'a>(
         let run = run_sil_recorded(sc.clone(), &cfg, |_, _| Hook::Continue, dir.as_deref())
             .map_err(|e| e.to_string())?;
         Ok(Verdict::judge(
-            "sil",
+            Mode::Sil,
             sc,
             run.sim.report(run.outcome),
             Some(&run.trace),
@@ -197,7 +198,7 @@ pub fn default_tune(
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// "sil" or "hil".
-    pub mode: String,
+    pub mode: Mode,
     pub goal_reached: bool,
     /// When the run ended, simulated seconds.
     pub time_s: Option<f64>,
@@ -245,7 +246,7 @@ fn outcome_text(e: &SuiteEntry) -> String {
 impl ItemRecord {
     pub fn of(e: &SuiteEntry) -> ItemRecord {
         let metrics = e.verdict.as_ref().map(|v| Metrics {
-            mode: v.mode.clone(),
+            mode: v.mode,
             goal_reached: v.goal_reached,
             time_s: finite(v.time()),
             path_m: finite(v.report.path_length),
@@ -662,7 +663,7 @@ mod tests {
             passed,
             outcome: outcome.to_owned(),
             metrics: Some(Metrics {
-                mode: "sil".to_owned(),
+                mode: Mode::Sil,
                 goal_reached: passed,
                 time_s: Some(20.0 + index as f64),
                 path_m: Some(36.0),
@@ -677,7 +678,8 @@ mod tests {
 
     #[test]
     fn junit_carries_a_failure_message_with_control_characters_as_valid_xml() {
-        let message = "FAILED: goal not reached\u{1b}[31m (3.2 m)\u{1b}[0m\u{0}\u{7}\u{8} & <wall> \"x\"";
+        let message =
+            "FAILED: goal not reached\u{1b}[31m (3.2 m)\u{1b}[0m\u{0}\u{7}\u{8} & <wall> \"x\"";
         let s = Summary::of(vec![
             record(1, 1, false, message),
             record(0, 0, true, "passed"),

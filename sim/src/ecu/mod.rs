@@ -185,13 +185,11 @@ impl EcuNode {
             }
         }
         let own = match self.safety_ref().fault() {
-            Some(safety::Cause::Actuator) => {
-                self.safety_ref().actuator_fault().map(|c| match c {
-                    crate::faults::EcuFaultCode::Overcurrent => FaultReportCode::ActuatorOvercurrent,
-                    crate::faults::EcuFaultCode::Sensor => FaultReportCode::ActuatorSensor,
-                    crate::faults::EcuFaultCode::Internal => FaultReportCode::ActuatorFault,
-                })
-            }
+            Some(safety::Cause::Actuator) => self.safety_ref().actuator_fault().map(|c| match c {
+                crate::faults::EcuFaultCode::Overcurrent => FaultReportCode::ActuatorOvercurrent,
+                crate::faults::EcuFaultCode::Sensor => FaultReportCode::ActuatorSensor,
+                crate::faults::EcuFaultCode::Internal => FaultReportCode::ActuatorFault,
+            }),
             cause => cause.and_then(|c| c.own_fault_code()),
         };
         match own {

@@ -216,7 +216,8 @@ impl<B: Can> Station<B> {
             }
             let bytes = &data[..fault.dlc.map_or(data.len(), usize::from)];
             if fault.delay_s > 0.0 {
-                self.delayed_tx.push_back((now + fault.delay_s, id, bytes.to_vec()));
+                self.delayed_tx
+                    .push_back((now + fault.delay_s, id, bytes.to_vec()));
             } else {
                 self.port.send_bytes(id, bytes)?;
                 self.sent += 1;
