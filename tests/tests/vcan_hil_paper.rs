@@ -17,6 +17,16 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
     let dir = tempfile::tempdir()?;
     let results = dir.path().join("results");
     let run_id = format!("test-{}", std::process::id());
+    // can-utils' own bus-load meter on the same interface, for the verdict's figure
+    // (line-buffered into a file: one line a second).
+    let load_log = dir.path().join("canbusload.log");
+    let mut canbusload = Command::new("stdbuf")
+        .args(["-oL", "canbusload"])
+        .arg(format!("{}@500000", vcan.name))
+        .stdout(std::fs::File::create(&load_log)?)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("starting canbusload (can-utils, scripts/install-deps.sh)")?;
     let out = Command::new(workspace_bin("ugv-sim")?)
         .args([
             "run",
@@ -35,6 +45,10 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
         .arg(dir.path().join("gps"))
         .output()
         .context("running ugv-sim")?;
+    // The last second's line is out once a second has passed.
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let _ = canbusload.kill();
+    let _ = canbusload.wait();
     let stderr = String::from_utf8_lossy(&out.stderr);
     let verdict: serde_json::Value = serde_json::from_slice(&out.stdout)
         .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
@@ -90,6 +104,40 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
     let p50 = latency["fix_to_command"]["p50_ms"].as_f64().unwrap_or(-1.0);
     let read = latency["fix_to_read"]["p50_ms"].as_f64().unwrap_or(-1.0);
     ensure!(p50 > 0.0 && read > 0.0 && p50 >= read, "{latency}");
+    // The verdict's bus load against canbusload's (both worst-case bit stuffing): the
+    // same bits per frame, and the frames canbusload counted in the seconds it saw
+    // traffic are those of the run (it also sees the frames before and after, and its
+    // seconds do not start with the run's).
+    let load = &verdict["bus_load"];
+    let frames = load["frames"].as_u64().context("bus_load.frames")?;
+    let bits = load["bits"].as_u64().context("bus_load.bits")?;
+    ensure!(bits == frames * 135, "{load}");
+    let log = std::fs::read_to_string(&load_log)?;
+    let (mut their_frames, mut their_bits) = (0u64, 0u64);
+    for line in log
+        .lines()
+        .filter(|l| l.contains(&format!("{}@500000", vcan.name)))
+    {
+        // " vcanX@500000   805   74491  36656  15%"
+        let f: Vec<&str> = line.split_whitespace().collect();
+        their_frames += f.get(1).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+        their_bits += f.get(2).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+    }
+    eprintln!(
+        "bus load: ours {frames} frames, {bits} bits, mean {:.1} %, peak {:.1} %; canbusload {their_frames} frames, {their_bits} bits",
+        load["mean_pct"].as_f64().unwrap_or(-1.0),
+        load["peak_pct"].as_f64().unwrap_or(-1.0)
+    );
+    ensure!(their_frames > 0, "canbusload saw nothing:\n{log}");
+    ensure!(
+        their_bits == their_frames * 135,
+        "canbusload's bits per frame:\n{log}"
+    );
+    let ratio = their_frames as f64 / frames as f64;
+    ensure!(
+        (0.97..=1.1).contains(&ratio),
+        "canbusload counted {their_frames} frames, the verdict {frames}:\n{log}"
+    );
     for file in [
         "verdict.json",
         "trace.json",

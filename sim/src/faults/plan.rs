@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, positive_up_to, within};
 
 use crate::devices::gps::FixKind;
+use crate::scenario::ScenarioError;
 
 /// Most faults in one plan.
 pub const MAX_FAULTS: usize = 1_000;
@@ -736,25 +737,10 @@ pub struct PlanFile {
     pub expect: Option<Expectations>,
 }
 
-/// Why a fault plan file was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum PlanError {
-    #[error("reading {file}: {source}")]
-    Read {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{file}: {message}")]
-    Parse { file: String, message: String },
-    #[error(transparent)]
-    Field(#[from] ugv_fields::LocatedError),
-}
-
 impl PlanFile {
     /// Parse and validate TOML text; `file` names it in errors.
-    pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, PlanError> {
-        let plan: PlanFile = toml::from_str(text).map_err(|e| PlanError::Parse {
+    pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, ScenarioError> {
+        let plan: PlanFile = toml::from_str(text).map_err(|e| ScenarioError::Parse {
             file: file.to_owned(),
             message: e.to_string().trim_end().to_owned(),
         })?;
@@ -763,9 +749,9 @@ impl PlanFile {
         Ok(plan)
     }
 
-    pub fn load(path: &std::path::Path) -> Result<PlanFile, PlanError> {
+    pub fn load(path: &std::path::Path) -> Result<PlanFile, ScenarioError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| PlanError::Read {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
             file: file.clone(),
             source,
         })?;
