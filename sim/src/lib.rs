@@ -13,6 +13,7 @@ pub mod devices;
 pub mod ecu;
 pub mod faults;
 pub mod mission;
+pub mod mode;
 pub mod plot;
 pub mod record;
 pub mod run;
@@ -24,5 +25,6 @@ pub mod vehicle;
 pub mod verdict;
 pub mod world;
 
+pub use mode::Mode;
 pub use run::{Outcome, RunReport, Sim, SimError};
 pub use scenario::{Scenario, ScenarioError};

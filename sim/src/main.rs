@@ -32,7 +32,7 @@ use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::run::Snapshot;
 use ugv_sim::sil::Hook;
 use ugv_sim::verdict::{Verdict, write_results};
-use ugv_sim::{Outcome, Scenario};
+use ugv_sim::{Mode, Outcome, Scenario};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -457,7 +457,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
             eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
         }
         let report = run.sim.report(run.outcome.clone());
-        let verdict = Verdict::judge("sil", &sc, report, Some(&run.trace));
+        let verdict = Verdict::judge(Mode::Sil, &sc, report, Some(&run.trace));
         eprintln!(
             "ugv-sim: SIL {:.1} s simulated in {wall:.2} s ({:.0}x real time)",
             verdict.time(),

@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::Serialize;
 use ugv_controller::trace::Trace;
 
+use crate::mode::Mode;
 use crate::plot::{Figure, PlannedPath, render};
 use crate::run::{Outcome, RunReport};
 use crate::scenario::Scenario;
@@ -30,7 +31,7 @@ pub struct ControllerSummary {
 #[derive(Clone, Debug, Serialize)]
 pub struct Verdict {
     /// "hil" or "sil".
-    pub mode: String,
+    pub mode: Mode,
     pub passed: bool,
     /// Why it did not pass (empty when it did).
     pub failures: Vec<String>,
@@ -75,7 +76,7 @@ impl Verdict {
     }
 
     pub fn judge(
-        mode: &str,
+        mode: Mode,
         scenario: &Scenario,
         report: RunReport,
         trace: Option<&Trace>,
@@ -171,7 +172,7 @@ impl Verdict {
             infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
         });
         Verdict {
-            mode: mode.to_owned(),
+            mode,
             passed: failures.is_empty(),
             failures,
             goal_reached,
@@ -244,7 +245,7 @@ pub fn write_results(
     let title = format!(
         "{} ({}): {}",
         scenario.name,
-        verdict.mode.to_uppercase(),
+        verdict.mode.as_str().to_uppercase(),
         if verdict.passed {
             "passed".to_owned()
         } else {

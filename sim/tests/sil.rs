@@ -6,19 +6,19 @@
 #![allow(clippy::expect_used)]
 
 use ugv_controller::config::FollowerKind;
-use ugv_sim::Outcome;
 use ugv_sim::devices::gps::{FixEvent, FixKind};
 use ugv_sim::mission::controller_config;
 use ugv_sim::scenario::{Obstacle, Scenario};
 use ugv_sim::sil::run_sil;
 use ugv_sim::verdict::Verdict;
+use ugv_sim::{Mode, Outcome};
 
 fn verdict(sc: &Scenario) -> (Verdict, String) {
     let cfg = controller_config(sc, FollowerKind::Optimal);
     let run = run_sil(sc.clone(), &cfg).expect("SIL run");
     let mode = serde_json::to_string(&run.trace.mode).expect("mode");
     (
-        Verdict::judge("sil", sc, run.sim.report(run.outcome), Some(&run.trace)),
+        Verdict::judge(Mode::Sil, sc, run.sim.report(run.outcome), Some(&run.trace)),
         mode,
     )
 }
@@ -145,7 +145,12 @@ fn an_anfis_follower_trained_on_a_recorded_run_drives_the_paper_scenario() {
     let mut anfis = controller_config(&sc, FollowerKind::Anfis);
     anfis.follower.anfis_model = Some(model);
     let run = run_sil(sc.clone(), &anfis).expect("ANFIS run");
-    let v = Verdict::judge("sil", &sc, run.sim.report(run.outcome), Some(&run.trace));
+    let v = Verdict::judge(
+        Mode::Sil,
+        &sc,
+        run.sim.report(run.outcome),
+        Some(&run.trace),
+    );
     assert!(v.passed, "{:?}", v.failures);
     let c = v.controller.expect("controller summary");
     assert!(c.tracking_error_rms < 0.3, "{}", c.tracking_error_rms);
@@ -217,7 +222,12 @@ fn a_crossing_obstacle_timed_to_meet_the_car_is_yielded_to_and_the_goal_reached(
         .filter(|p| p.moving)
         .filter_map(|p| p.pace)
         .collect();
-    let v = Verdict::judge("sil", &sc, run.sim.report(run.outcome), Some(&run.trace));
+    let v = Verdict::judge(
+        Mode::Sil,
+        &sc,
+        run.sim.report(run.outcome),
+        Some(&run.trace),
+    );
     assert!(
         v.passed && v.goal_reached && !v.collision,
         "{:?}",
@@ -245,7 +255,12 @@ fn a_car_facing_away_from_the_goal_turns_round_and_arrives() {
     let cfg = controller_config(&sc, FollowerKind::Optimal);
     let run = run_sil(sc.clone(), &cfg).expect("SIL run");
     let aligned = run.trace.plans.iter().filter(|p| p.align.is_some()).count();
-    let v = Verdict::judge("sil", &sc, run.sim.report(run.outcome), Some(&run.trace));
+    let v = Verdict::judge(
+        Mode::Sil,
+        &sc,
+        run.sim.report(run.outcome),
+        Some(&run.trace),
+    );
     assert!(v.passed, "{:?}", v.failures);
     assert!(aligned > 0, "it turned first");
     assert!(

@@ -25,7 +25,7 @@ fn run(hook: impl FnMut(f64, &mut ugv_sim::sil::SilController) -> Hook) -> (SilR
     let cfg = controller_config(&sc, FollowerKind::Optimal);
     let run = run_sil_with(sc.clone(), &cfg, hook).expect("SIL run");
     let verdict = Verdict::judge(
-        "sil",
+        ugv_sim::Mode::Sil,
         &sc,
         run.sim.report(run.outcome.clone()),
         Some(&run.trace),

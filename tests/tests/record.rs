@@ -48,7 +48,7 @@ fn python_mcap_finds_the_foxglove_schemas_and_the_counts_the_verdict_implies() {
     let dir = tempfile::tempdir().unwrap();
     let (sc, run) = recorded_paper_run(dir.path(), None);
     let verdict = Verdict::judge(
-        "sil",
+        ugv_sim::Mode::Sil,
         &sc,
         run.sim.report(run.outcome.clone()),
         Some(&run.trace),

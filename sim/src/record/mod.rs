@@ -96,13 +96,8 @@ pub enum RecordError {
     },
 }
 
-/// Which loop made the recording.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RecordMode {
-    Sil,
-    Hil,
-}
+/// Which loop made the recording: the run's [`Mode`](crate::Mode).
+pub use crate::mode::Mode as RecordMode;
 
 /// What a replay needs to know about the run, kept in the MCAP metadata record
 /// [`RUN_METADATA`] (one string per field) and the attachment [`CONFIG_ATTACHMENT`].
