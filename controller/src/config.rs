@@ -85,17 +85,18 @@ pub struct Vehicle {
 
 impl Default for Vehicle {
     fn default() -> Self {
+        let car = crate::car::PAPER_CAR;
         Vehicle {
-            wheelbase: 1.65,
-            max_steer_deg: 35.0,
+            wheelbase: car.wheelbase,
+            max_steer_deg: car.max_steer_deg,
             steer_rate_deg_s: 0.0,
-            max_speed: 6.7,
-            radius: 2.0,
-            antenna_x: 0.5,
-            antenna_y: 0.0,
-            laser_x: 2.0,
-            laser_y: 0.0,
-            laser_yaw_deg: 0.0,
+            max_speed: car.max_speed,
+            radius: car.radius,
+            antenna_x: car.antenna[0],
+            antenna_y: car.antenna[1],
+            laser_x: car.laser[0],
+            laser_y: car.laser[1],
+            laser_yaw_deg: car.laser_yaw_deg,
         }
     }
 }

@@ -4,6 +4,7 @@
 //! safety stop, over the real wires (NMEA, iceoryx2 laser frames, SocketCAN).
 
 pub mod anfis;
+pub mod car;
 pub mod config;
 pub mod core;
 pub mod guidance;

@@ -145,14 +145,15 @@ pub struct VehicleConfig {
 
 impl Default for VehicleConfig {
     fn default() -> Self {
+        let car = ugv_controller::car::PAPER_CAR;
         VehicleConfig {
-            wheelbase: 1.65,
+            wheelbase: car.wheelbase,
             length: 2.4,
             width: 1.2,
             rear_overhang: 0.375,
-            max_steer_deg: 35.0,
-            max_speed: 6.7,
-            radius: 2.0,
+            max_steer_deg: car.max_steer_deg,
+            max_speed: car.max_speed,
+            radius: car.radius,
         }
     }
 }

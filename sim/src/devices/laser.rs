@@ -156,10 +156,11 @@ pub struct LaserConfig {
 
 impl Default for LaserConfig {
     fn default() -> Self {
+        let car = ugv_controller::car::PAPER_CAR;
         LaserConfig {
-            mount_x: 2.0,
-            mount_y: 0.0,
-            mount_yaw_deg: 0.0,
+            mount_x: car.laser[0],
+            mount_y: car.laser[1],
+            mount_yaw_deg: car.laser_yaw_deg,
             profile: LaserProfile::Lms111,
             fov_deg: None,
             resolution_deg: None,

@@ -318,9 +318,10 @@ pub struct GpsConfig {
 
 impl Default for GpsConfig {
     fn default() -> Self {
+        let car = ugv_controller::car::PAPER_CAR;
         GpsConfig {
-            antenna_x: 0.5,
-            antenna_y: 0.0,
+            antenna_x: car.antenna[0],
+            antenna_y: car.antenna[1],
             antenna_z: 1.8,
             rate_hz: 10.0,
             baud: 115_200,

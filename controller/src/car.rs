@@ -1,0 +1,33 @@
+//! The paper's golf car: the one source of the vehicle numbers that the controller's
+//! configuration defaults to and that the simulator's vehicle, GPS and laser default to.
+
+/// The golf car of the seed paper, as a constant both crates read.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Car {
+    /// Rear axle to front axle, metres.
+    pub wheelbase: f64,
+    /// Road-wheel angle limit, degrees.
+    pub max_steer_deg: f64,
+    /// Top speed, m/s.
+    pub max_speed: f64,
+    /// The circle the planner treats the car as, around the rear axle (the paper's
+    /// r_0), metres.
+    pub radius: f64,
+    /// GPS antenna position in the vehicle frame (x forward, y left of the rear axle),
+    /// metres.
+    pub antenna: [f64; 2],
+    /// Laser scanner mounting position in the vehicle frame, metres, and yaw, degrees.
+    pub laser: [f64; 2],
+    pub laser_yaw_deg: f64,
+}
+
+/// The paper's car.
+pub const PAPER_CAR: Car = Car {
+    wheelbase: 1.65,
+    max_steer_deg: 35.0,
+    max_speed: 6.7,
+    radius: 2.0,
+    antenna: [0.5, 0.0],
+    laser: [2.0, 0.0],
+    laser_yaw_deg: 0.0,
+};
