@@ -9,23 +9,21 @@
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::net::SocketAddr;
 use std::sync::mpsc;
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use firmware_bridge::cola::driver::{DriverConfig, DriverEvent, DriverStats, drive};
 use firmware_bridge::cola::{ClientConfig, ColaClient, ColaError, ColaServer, ServerConfig};
-use firmware_bridge::laser::{LaserFrame, LaserPublisher, LaserSubscriber, service_name};
+use firmware_bridge::laser::{LaserFrame, LaserPublisher, LaserSubscriber};
 
 const WAIT: Duration = Duration::from_secs(20);
 
 fn unique_service(test: &str) -> String {
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
-    service_name(&format!("driver-{}-{nanos}-{test}", std::process::id()))
+    common::unique_service("driver", test)
 }
 
 /// What a driver thread saw: each event as text (errors with their message).

@@ -5,27 +5,25 @@
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpListener};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use firmware_bridge::cola::{
     ColaServer, EncodeOptions, Message, ScanKind, ServerConfig, TelegramDecoder, frame_telegram,
     scan_from_frame,
 };
-use firmware_bridge::laser::{LaserFrame, LaserSubscriber, service_name};
+use firmware_bridge::laser::{LaserFrame, LaserSubscriber};
 
 /// Generous: only bounds a broken build, nothing here is timed.
 const WAIT: Duration = Duration::from_secs(30);
 
 fn unique_service(test: &str) -> String {
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
-    service_name(&format!("cola-{}-{nanos}-{test}", std::process::id()))
+    common::unique_service("cola", test)
 }
 
 fn make_frame(seq: u64) -> LaserFrame {

@@ -3,13 +3,15 @@
 //! subscriber), late subscribers and malformed frames. Every test uses its own service
 //! name.
 
+mod common;
+
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use anyhow::{Context, Result, ensure};
 use firmware_bridge::laser::{
-    LaserError, LaserFrame, LaserPublisher, LaserSubscriber, SUBSCRIBER_BUFFER, service_name,
+    LaserError, LaserFrame, LaserPublisher, LaserSubscriber, SUBSCRIBER_BUFFER,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
@@ -18,11 +20,7 @@ use iceoryx2::prelude::*;
 const WAIT: Duration = Duration::from_secs(20);
 
 fn unique_service(test: &str) -> String {
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
-    service_name(&format!("test-{}-{nanos}-{test}", std::process::id()))
+    common::unique_service("test", test)
 }
 
 /// Beam counts up to the maximum, varying with the sequence number.
