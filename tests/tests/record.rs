@@ -373,8 +373,18 @@ fn gpsfake_feeds_gps_nmea_to_gpsd_which_reports_each_fix() {
         .filter(|v| v["class"] == "TPV" && v["lat"].is_number())
         .collect();
     assert!(!tpvs.is_empty(), "no TPV from gpsd: {reports}");
-    let mut matched = std::collections::BTreeSet::new();
+    // gpsd reports an epoch as it assembles it (a 2D TPV from an RMC before the GGA
+    // brings the height, then the 3D one): each epoch is judged by its last TPV, and
+    // the newest epoch, which may still have been assembling, not at all.
+    let mut last: std::collections::BTreeMap<String, &Value> = std::collections::BTreeMap::new();
     for tpv in &tpvs {
+        if let Some(time) = tpv["time"].as_str() {
+            last.insert(time.to_owned(), tpv);
+        }
+    }
+    last.pop_last();
+    let mut matched = std::collections::BTreeSet::new();
+    for tpv in last.values() {
         assert_eq!(tpv["mode"], 3, "{tpv}");
         assert_eq!(tpv["status"], 3, "RTK fixed: {tpv}");
         let time = tpv["time"].as_str().unwrap();
