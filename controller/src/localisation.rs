@@ -19,6 +19,9 @@ pub struct Jump {
     pub metres: f64,
 }
 
+/// How late a fix may reach the controller after its epoch, for the jump gate, s.
+const FIX_AGE_ALLOWANCE_S: f64 = 0.3;
+
 /// The farthest a fix may land from the dead-reckoned pose, metres: several times
 /// what the fix kind's noise and a second of dead reckoning explain (RTK fixed: 1-2
 /// cm; float: decimetres), so only a jump or multipath exceeds it.
@@ -160,7 +163,11 @@ impl Localiser {
             let metres = (pose.x - p.x).hypot(pose.y - p.y);
             // A change of fix kind moves the position by the worse kind's error
             // (float converging to fixed): the wider gate of the two holds.
-            let gate = jump_gate(quality).max(self.pose_quality.map_or(0.0, jump_gate));
+            // The fix is compared with the pose now, but it was taken at its epoch and
+            // may arrive late (a loaded machine, a slow line): the way driven in that
+            // time is no jump.
+            let gate = jump_gate(quality).max(self.pose_quality.map_or(0.0, jump_gate))
+                + self.speed.abs() * FIX_AGE_ALLOWANCE_S;
             if metres > gate {
                 self.jump.get_or_insert(Jump { at: now, metres });
                 return;

@@ -47,7 +47,9 @@ struct Args {
     stats: Option<PathBuf>,
     /// Seconds between stats lines on stderr, 0.001 to 86400 (0: none).
     #[arg(long, value_name = "SECONDS", default_value = "5", value_parser = firmware_bridge::cli::seconds_or_zero(0.001, 86_400.0))]
-    interval: Option<Duration>,
+    // Fully qualified: the parser yields the Option itself (0 is none), so clap must
+    // not treat the field as an optional argument of Duration.
+    interval: ::std::option::Option<Duration>,
     /// Milliseconds a frame waits for a full transmit queue before it is given up
     /// (and counted as dropped), 0 to 60000.
     #[arg(
