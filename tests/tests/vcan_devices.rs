@@ -56,14 +56,21 @@ impl Bench {
     /// its own, and the paper's HIL run records).
     fn sim(&self, sim_can: &str, start_controller: bool) -> Result<Command> {
         let mut cmd = Command::new(workspace_bin("ugv-sim")?);
-        cmd.args(["run", "--no-record", "--can", sim_can, "--run-id", &self.run_id])
-            .args(["--status-every", "5"])
-            .arg("--devices")
-            .arg(self.dir.path().join("bench.toml"))
-            .arg("--results")
-            .arg(self.results())
-            .arg("--gps-link")
-            .arg(self.dir.path().join("gps"));
+        cmd.args([
+            "run",
+            "--no-record",
+            "--can",
+            sim_can,
+            "--run-id",
+            &self.run_id,
+        ])
+        .args(["--status-every", "5"])
+        .arg("--devices")
+        .arg(self.dir.path().join("bench.toml"))
+        .arg("--results")
+        .arg(self.results())
+        .arg("--gps-link")
+        .arg(self.dir.path().join("gps"));
         if start_controller {
             cmd.arg("--controller")
                 .arg(workspace_bin("ugv-controller")?);
