@@ -744,3 +744,30 @@ fn device_field(e: &crate::devices::map::DeviceError) -> FieldError {
         e.message.clone(),
     )
 }
+
+/// Fault plan files load like scenarios (their errors are scenario errors).
+impl crate::faults::plan::PlanFile {
+    /// Parse and validate TOML text; `file` names it in errors.
+    pub fn from_toml(
+        text: &str,
+        file: &str,
+    ) -> Result<crate::faults::plan::PlanFile, ScenarioError> {
+        let plan: crate::faults::plan::PlanFile =
+            toml::from_str(text).map_err(|e| ScenarioError::Parse {
+                file: file.to_owned(),
+                message: e.to_string().trim_end().to_owned(),
+            })?;
+        crate::faults::plan::validate_plan(&plan.faults, &plan.expect.clone().unwrap_or_default())
+            .map_err(|e| e.located(text, file))?;
+        Ok(plan)
+    }
+
+    pub fn load(path: &std::path::Path) -> Result<crate::faults::plan::PlanFile, ScenarioError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        crate::faults::plan::PlanFile::from_toml(&text, &file)
+    }
+}

@@ -156,6 +156,12 @@ impl Injector {
             .map(|(i, (f, _))| (i, &f.kind))
     }
 
+    /// [`Self::active`], owned: the injector changes its counts and draws while
+    /// it goes through them.
+    fn active_owned(&self, now: f64) -> Vec<(usize, FaultKind)> {
+        self.active(now).map(|(i, k)| (i, k.clone())).collect()
+    }
+
     fn count(&mut self, i: usize) {
         self.runs[i].injected += 1;
     }
@@ -206,7 +212,7 @@ impl Injector {
     /// What the faults in force do to a frame the ECU `node` sends at `now`.
     pub fn on_ecu_tx(&mut self, now: f64, node: Node) -> TxFault {
         let mut out = TxFault::default();
-        let hits: Vec<(usize, FaultKind)> = self.active(now).map(|(i, k)| (i, k.clone())).collect();
+        let hits = self.active_owned(now);
         for (i, k) in hits {
             let on_node = |n: Node| n == node;
             let hit = match k {
@@ -265,7 +271,7 @@ impl Injector {
         };
         let heartbeat = matches!(m, GolfCarMessage::ControllerHeartbeat(_));
         let mut out = RxFault::Pass;
-        let hits: Vec<(usize, FaultKind)> = self.active(now).map(|(i, k)| (i, k.clone())).collect();
+        let hits = self.active_owned(now);
         for (i, k) in hits {
             let on = |n: Node| match n {
                 Node::Controller => from_controller,
@@ -337,7 +343,7 @@ impl Injector {
     pub fn gps(&mut self, now: f64, epoch: Option<GpsEpoch>) -> Option<GpsEpoch> {
         let mut epoch = epoch?;
         let original = epoch.text.clone();
-        let hits: Vec<(usize, FaultKind)> = self.active(now).map(|(i, k)| (i, k.clone())).collect();
+        let hits = self.active_owned(now);
         let mut stale = false;
         for (i, k) in hits {
             match k {
@@ -404,7 +410,7 @@ impl Injector {
     /// The laser scan as the faults in force leave it (`None`: nothing goes out).
     pub fn laser(&mut self, now: f64, frame: Option<Box<LaserFrame>>) -> Option<Box<LaserFrame>> {
         let mut frame = frame?;
-        let hits: Vec<(usize, FaultKind)> = self.active(now).map(|(i, k)| (i, k.clone())).collect();
+        let hits = self.active_owned(now);
         let mut frozen = false;
         let n = (frame.count as usize).min(frame.ranges.len());
         for (i, k) in hits {

@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, positive_up_to, within};
 
 use crate::devices::gps::FixKind;
-use crate::scenario::ScenarioError;
 
 /// Most faults in one plan.
 pub const MAX_FAULTS: usize = 1_000;
@@ -735,26 +734,4 @@ pub struct PlanFile {
     pub faults: Vec<FaultSpec>,
     /// Replaces the scenario's `[expect]` when given.
     pub expect: Option<Expectations>,
-}
-
-impl PlanFile {
-    /// Parse and validate TOML text; `file` names it in errors.
-    pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, ScenarioError> {
-        let plan: PlanFile = toml::from_str(text).map_err(|e| ScenarioError::Parse {
-            file: file.to_owned(),
-            message: e.to_string().trim_end().to_owned(),
-        })?;
-        validate_plan(&plan.faults, &plan.expect.clone().unwrap_or_default())
-            .map_err(|e| e.located(text, file))?;
-        Ok(plan)
-    }
-
-    pub fn load(path: &std::path::Path) -> Result<PlanFile, ScenarioError> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
-            file: file.clone(),
-            source,
-        })?;
-        PlanFile::from_toml(&text, &file)
-    }
 }
