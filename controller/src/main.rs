@@ -24,6 +24,7 @@ use firmware_bridge::CanPort;
 use firmware_bridge::clock::WallClock;
 use firmware_bridge::laser::LaserSubscriber;
 use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
+use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller};
 use ugv_controller::runtime::Runtime;
@@ -94,6 +95,11 @@ struct RunArgs {
     /// Seconds between status lines (0: none).
     #[arg(long, default_value_t = 1.0)]
     status_every: f64,
+    /// SCHED_FIFO priority of the command loop, 0 (ordinary scheduling) to 99; needs
+    /// root or CAP_SYS_NICE, and runs on without it, saying so. The planning thread
+    /// stays ordinary, so the loop preempts it.
+    #[arg(long, default_value_t = realtime::DEFAULT_PRIORITY, value_parser = realtime::parse_priority)]
+    rt_priority: u8,
 }
 
 #[derive(Subcommand, Debug)]
@@ -254,6 +260,12 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     if let Some(w) = trace {
         rt = rt.with_trace(w);
     }
+    // After the planning thread started, so that it stays an ordinary thread.
+    let rt_sched = realtime::promote(args.rt_priority);
+    eprintln!(
+        "{}",
+        rt_sched.promotion.describe("ugv-controller: command loop")
+    );
     let mut clock = WallClock::new(COMMAND_PERIOD);
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();

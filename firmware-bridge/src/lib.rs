@@ -21,6 +21,7 @@ pub mod gateway;
 pub mod geodesy;
 pub mod laser;
 pub mod nmea;
+pub mod realtime;
 pub mod sync;
 
 pub use can::{BridgeError, CanPort, Received};

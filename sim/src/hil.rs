@@ -534,6 +534,9 @@ pub struct HilOptions {
     pub isolate: Option<String>,
     /// Record the run into `results` (see [`crate::record`]).
     pub record: bool,
+    /// SCHED_FIFO priority of the tick loop while it runs, 0 for none (see
+    /// [`firmware_bridge::realtime`]).
+    pub rt_priority: u8,
 }
 
 /// Run `scenario` in HIL with the controller configured by `config`: open the wires,
@@ -679,6 +682,9 @@ pub fn run_scenario(
         "physics {} Hz, time limit {} s",
         sc.sim.physics_hz, sc.sim.time_limit_s
     ));
+    // The controller and every helper thread were started: they stay ordinary.
+    let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
+    log(&rt_sched.promotion.describe("tick loop"));
     let run = run_hil(
         &mut sim,
         &mut wires,
@@ -688,6 +694,7 @@ pub fn run_scenario(
         status,
         recording.as_mut(),
     );
+    drop(rt_sched);
     if let Some(r) = recording {
         log(&crate::record::describe(&r.finish()));
     }

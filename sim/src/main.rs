@@ -23,6 +23,7 @@ use clap::{Parser, Subcommand};
 use firmware_bridge::CanPort;
 use firmware_bridge::cli::number;
 use firmware_bridge::clock::WallClock;
+use firmware_bridge::realtime;
 use ugv_controller::config::FollowerKind;
 use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
@@ -79,6 +80,10 @@ enum Command {
         /// Seconds between status lines, 0.001 to 3600.
         #[arg(long, default_value_t = 1.0, value_parser = number(0.001, 3600.0, "seconds"))]
         status_every: f64,
+        /// SCHED_FIFO priority of the ECU's loop, 0 (ordinary scheduling) to 99; needs
+        /// root or CAP_SYS_NICE, and runs on without it, saying so.
+        #[arg(long, default_value_t = realtime::DEFAULT_PRIORITY, value_parser = realtime::parse_priority)]
+        rt_priority: u8,
     },
     /// Replay a recording (run.mcap) into the controller library in lockstep and
     /// compare its commands with the recorded ones: exactly for a SIL recording,
@@ -196,6 +201,11 @@ struct RunArgs {
     /// Seconds between status lines, 0.001 to 3600.
     #[arg(long, default_value_t = 0.5, value_parser = number(0.001, 3600.0, "seconds"))]
     status_every: f64,
+    /// HIL: SCHED_FIFO priority of the tick loop, 0 (ordinary scheduling) to 99;
+    /// needs root or CAP_SYS_NICE, and runs on without it, saying so. The controller
+    /// it starts sets its own (`ugv-controller run --rt-priority`).
+    #[arg(long, default_value_t = realtime::DEFAULT_PRIORITY, value_parser = realtime::parse_priority)]
+    rt_priority: u8,
     /// HIL in a private network namespace (ugv-RUN_ID): the CAN interface is created
     /// there, with the simulator and the controller, and no other process can open it
     /// (needs root). Look in with `sudo ip netns exec ugv-RUN_ID candump IFACE`.
@@ -297,7 +307,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             can,
             scenario,
             status_every,
-        } => run_ecu(kind, &can, scenario.as_ref(), status_every),
+            rt_priority,
+        } => run_ecu(kind, &can, scenario.as_ref(), status_every, rt_priority),
         Command::Suite(args) => run_suite(args),
         Command::Replay { recording } => replay(&recording),
         Command::Merge { shards, out } => merge_shards(&shards, &out),
@@ -318,6 +329,7 @@ fn run_ecu(
     can: &str,
     scenario: Option<&PathBuf>,
     status_every: f64,
+    rt_priority: u8,
 ) -> Result<ExitCode> {
     anyhow::ensure!(
         status_every > 0.0 && status_every.is_finite(),
@@ -330,6 +342,8 @@ fn run_ecu(
         "ugv-sim: simulated {kind:?} ECU on {can} (parameters of scenario {:?}), {} Hz; Ctrl-C ends it",
         sc.name, sc.sim.physics_hz
     );
+    let rt_sched = realtime::promote(rt_priority);
+    eprintln!("ugv-sim: {}", rt_sched.promotion.describe("ECU loop"));
     let mut clock = WallClock::new(1.0 / sc.sim.physics_hz);
     let fin = run_standalone(kind, &sc, port, &mut clock, &stop, status_every, &mut |s| {
         let unit = match kind {
@@ -489,6 +503,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         results: args.results.clone(),
         status_every: args.status_every,
         record: !args.no_record,
+        rt_priority: args.rt_priority,
     };
     let stop = stop_on_signal()?;
     let tty = std::io::stderr().is_terminal();
@@ -606,6 +621,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             results: results.join(&slug),
             status_every: 1.0,
             record,
+            rt_priority: realtime::DEFAULT_PRIORITY,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
         hil::run_scenario(&sc, &tune(&sc), &options, &stop, &mut |_| {}, &mut |_| {})

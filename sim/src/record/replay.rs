@@ -279,6 +279,10 @@ impl Recorded {
                 _ => {}
             }
         }
+        // In log-time order (HIL's CAN frames carry the kernel's receive times, the
+        // rest the simulator's): the replay delivers each at the first tick after it.
+        inputs.sort_by_key(|(ns, _)| *ns);
+        commands.sort_by_key(|c| c.ns);
         Ok(Recorded {
             info,
             config,
@@ -371,7 +375,10 @@ pub struct ReplayReport {
     pub scenario: String,
     pub mode: RecordMode,
     pub tolerance: Tolerance,
-    /// Simulated seconds replayed.
+    /// When the replayed controller started, simulated seconds: 0 for SIL, the
+    /// recorded controller's first frame for HIL.
+    pub controller_start_s: f64,
+    /// Simulated seconds replayed, from the controller's start.
     pub replayed_s: f64,
     pub inputs: u64,
     pub divergence: Option<Divergence>,
@@ -419,7 +426,10 @@ impl Comparer<'_> {
         }
     }
 
-    /// Signals of a frame, physical values; Counter and Crc left out unless exact.
+    /// Signals of a frame: name, physical value and the difference allowed (Counter
+    /// and Crc left out unless exact). A state, a flag or a gear (a signal with a
+    /// value table, or of one bit) must agree exactly: ten steps of a mode are
+    /// another mode.
     fn signals(&self, id: u32, data: &[u8]) -> Vec<(String, f64, f64)> {
         let Some(m) = u16::try_from(id).ok().and_then(|i| self.spec.message(i)) else {
             return Vec::new();
@@ -431,7 +441,14 @@ impl Comparer<'_> {
             .iter()
             .zip(m.decode_all(&p))
             .filter(|(_, v)| self.tol.steps == 0.0 || !matches!(v.name, "Counter" | "Crc"))
-            .map(|(s, v)| (v.name.to_owned(), v.value, s.factor.abs()))
+            .map(|(s, v)| {
+                let allowed = if s.size == 1 || !s.values.is_empty() {
+                    0.0
+                } else {
+                    self.tol.steps * s.factor.abs()
+                };
+                (v.name.to_owned(), v.value, allowed)
+            })
             .collect()
     }
 
@@ -483,12 +500,12 @@ impl Comparer<'_> {
         let ours = self.signals(id, data);
         let theirs = self.signals(id, &rec.data);
         let mut first_bad = None;
-        for ((signal, a, factor), (_, b, _)) in ours.iter().zip(&theirs) {
+        for ((signal, a, allowed), (_, b, _)) in ours.iter().zip(&theirs) {
             let diff = (a - b).abs();
             let stats = self.messages.entry(name.clone()).or_default();
             let max = stats.max_diff.entry(signal.clone()).or_insert(0.0);
             *max = max.max(diff);
-            if first_bad.is_none() && diff > self.tol.steps * factor + 1e-9 {
+            if first_bad.is_none() && diff > allowed + 1e-9 {
                 first_bad = Some((signal.clone(), *b, *a));
             }
         }
@@ -513,6 +530,52 @@ impl Comparer<'_> {
 
 fn hex(data: &[u8]) -> String {
     data.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+/// How many bytes of NMEA a serial line (a pty's or a tty's receive buffer) keeps for
+/// a reader that has not opened it yet: Linux's N_TTY buffer.
+const LINE_BUFFER: usize = 4096;
+
+/// Where the replayed controller's clock starts, nanoseconds on the recording's log
+/// time. SIL: at the recording's epoch, as the controller library did. HIL: at the
+/// recorded controller's first frame, since its process started on its own clock some
+/// time after the simulator began recording (a controller that starts at the epoch
+/// would wait for ECUs that the recording shows enabling only later, and estop).
+fn controller_start(rec: &Recorded) -> u64 {
+    match rec.info.mode {
+        RecordMode::Sil => rec.info.epoch_unix_ns,
+        RecordMode::Hil => rec
+            .commands
+            .first()
+            .map_or(rec.info.epoch_unix_ns, |c| c.ns),
+    }
+}
+
+/// What a controller starting at `start_ns` finds waiting on its ports, and the index
+/// of the first input after that. The GPS line keeps the newest whole sentences that
+/// fit its buffer, the laser service keeps its newest frame (the subscriber's
+/// history), and a CAN socket hears only frames sent after it was opened.
+fn waiting_at_start(rec: &Recorded, start_ns: u64) -> (Vec<&Input>, usize) {
+    let first_after = rec.inputs.partition_point(|(ns, _)| *ns < start_ns);
+    let before = &rec.inputs[..first_after];
+    let mut waiting = Vec::new();
+    let mut line_bytes = 0;
+    for (_, input) in before.iter().rev() {
+        match input {
+            Input::Gps(bytes) if line_bytes + bytes.len() <= LINE_BUFFER => {
+                line_bytes += bytes.len();
+                waiting.push(input);
+            }
+            // The line is full: older sentences were lost.
+            Input::Gps(_) => line_bytes = LINE_BUFFER + 1,
+            Input::Laser(_) if !waiting.iter().any(|i| matches!(i, Input::Laser(_))) => {
+                waiting.push(input);
+            }
+            Input::Laser(_) | Input::Can { .. } => {}
+        }
+    }
+    waiting.reverse();
+    (waiting, first_after)
 }
 
 /// Replay `rec` into the controller library and compare its commands with the
@@ -551,11 +614,19 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         .map(|(ns, _)| *ns)
         .max(rec.commands.last().map(|c| c.ns))
         .unwrap_or(rec.info.epoch_unix_ns);
-    let ns_of = |t: f64| rec.info.epoch_unix_ns + (t.max(0.0) * 1e9).round() as u64;
+    let start_ns = controller_start(rec);
+    let ns_of = |t: f64| start_ns + (t.max(0.0) * 1e9).round() as u64;
     // SIL's grid: the controller ticks on every control_every-th physics step.
     let dt = 1.0 / rec.info.physics_hz;
     let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
-    let mut next_input = 0;
+    let (backlog, mut next_input) = waiting_at_start(rec, start_ns);
+    for input in backlog {
+        match input {
+            Input::Gps(bytes) => rt.gps_mut().push(bytes),
+            Input::Laser(frame) => rt.laser_mut().push(frame.clone()),
+            Input::Can { .. } => {}
+        }
+    }
     let mut k: u64 = 0;
     let mut exit = None;
     let mut replayed_s = 0.0;
@@ -604,6 +675,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         scenario: rec.info.scenario.clone(),
         mode: rec.info.mode,
         tolerance: tol,
+        controller_start_s: cmp.time(start_ns),
         replayed_s,
         inputs: next_input as u64,
         divergence: cmp.divergence,
@@ -612,4 +684,119 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         skipped_frames: rec.skipped,
         controller_exit: exit,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn recording(mode: RecordMode, inputs: Vec<(u64, Input)>, commands: Vec<Command>) -> Recorded {
+        Recorded {
+            info: RunInfo {
+                mode,
+                scenario: "test".to_owned(),
+                physics_hz: 200.0,
+                epoch_unix_ns: 1_000,
+                can_interface: "vcan0".to_owned(),
+                gps_sentences: ReaderConfig::default().complete_when,
+                controller_toml: String::new(),
+            },
+            config: ControllerConfig::default(),
+            inputs,
+            commands,
+            truncated: None,
+            skipped: 0,
+        }
+    }
+
+    fn heartbeat(ns: u64) -> Command {
+        Command {
+            ns,
+            id: 0x100,
+            data: vec![0; 8],
+        }
+    }
+
+    #[test]
+    fn a_hil_controller_starts_at_its_first_frame_and_a_sil_one_at_the_epoch() {
+        let commands = vec![heartbeat(5_000), heartbeat(6_000)];
+        let hil = recording(RecordMode::Hil, Vec::new(), commands.clone());
+        assert_eq!(controller_start(&hil), 5_000);
+        let sil = recording(RecordMode::Sil, Vec::new(), commands);
+        assert_eq!(controller_start(&sil), 1_000);
+        // No command at all: the epoch.
+        assert_eq!(
+            controller_start(&recording(RecordMode::Hil, Vec::new(), Vec::new())),
+            1_000
+        );
+    }
+
+    #[test]
+    fn a_late_controller_finds_the_newest_sentences_that_fit_the_line_and_the_newest_scan() {
+        let sentence = |n: u8| Input::Gps(vec![n; 1500]);
+        let inputs = vec![
+            (1_100, sentence(1)),
+            (1_200, Input::Laser(Box::default())),
+            (1_300, sentence(2)),
+            (
+                1_400,
+                Input::Can {
+                    id: 0x200,
+                    data: vec![1],
+                },
+            ),
+            (1_500, sentence(3)),
+            (1_600, Input::Laser(Box::default())),
+            (1_700, sentence(4)),
+            (2_000, sentence(5)),
+        ];
+        let rec = recording(RecordMode::Hil, inputs, Vec::new());
+        let (waiting, next) = waiting_at_start(&rec, 2_000);
+        // Sentence 5 is at the start itself: delivered at the first tick, not waiting.
+        assert_eq!(next, 7);
+        let kinds: Vec<String> = waiting
+            .iter()
+            .map(|i| match i {
+                Input::Gps(b) => format!("gps{}", b[0]),
+                Input::Laser(_) => "laser".to_owned(),
+                Input::Can { .. } => "can".to_owned(),
+            })
+            .collect();
+        // 4096 bytes hold two 1500-byte sentences (the third would overflow): 3 and 4,
+        // oldest first, with the newest scan between them; no CAN frame.
+        assert_eq!(kinds, ["gps3", "laser", "gps4"]);
+    }
+
+    #[test]
+    fn hil_tolerance_allows_steps_on_values_but_not_on_states() {
+        let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC).unwrap();
+        let steering = spec
+            .messages
+            .iter()
+            .find(|m| m.name == "STEERING_CMD")
+            .unwrap();
+        let cmp = Comparer {
+            spec: &spec,
+            tol: Tolerance::HIL,
+            recorded: Vec::new(),
+            first_open: 0,
+            messages: BTreeMap::new(),
+            divergence: None,
+            epoch_ns: 0,
+        };
+        let frame = [1u8, 0, 0, 0, 0, 0, 0, 0];
+        let allowed: BTreeMap<String, f64> = cmp
+            .signals(u32::from(steering.id), &frame)
+            .into_iter()
+            .map(|(name, _, allowed)| (name, allowed))
+            .collect();
+        assert_eq!(allowed["Enable"], 0.0, "{allowed:?}");
+        let angle = steering
+            .signals
+            .iter()
+            .find(|s| s.name == "TargetAngle")
+            .unwrap();
+        assert!((allowed["TargetAngle"] - 10.0 * angle.factor.abs()).abs() < 1e-12);
+        assert!(!allowed.contains_key("Counter") && !allowed.contains_key("Crc"));
+    }
 }
