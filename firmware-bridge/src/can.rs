@@ -7,6 +7,7 @@
 //! which.
 
 pub mod membus;
+pub mod timed;
 
 use std::io;
 use std::time::{Duration, Instant};
@@ -208,18 +209,32 @@ where
     }
 }
 
+/// An error opening `iface`, named as one.
+fn open_error(iface: &str, source: io::Error) -> BridgeError {
+    match source.raw_os_error() {
+        Some(libc::ENODEV) => BridgeError::NoInterface {
+            iface: iface.to_owned(),
+        },
+        _ => BridgeError::Io {
+            iface: iface.to_owned(),
+            source,
+        },
+    }
+}
+
+impl CanPort<timed::TimedSocket> {
+    /// Open a raw CAN socket on `iface` whose frames are handed out by `horizon`
+    /// (see [`timed`]).
+    pub fn open_timed(iface: &str, horizon: timed::Horizon) -> Result<Self, BridgeError> {
+        let socket = timed::TimedSocket::open(iface, horizon).map_err(|e| open_error(iface, e))?;
+        Ok(CanPort::new(socket, iface))
+    }
+}
+
 impl CanPort<CanSocket> {
     /// Open a raw CAN socket on `iface` (vcan0, can0, ...).
     pub fn open(iface: &str) -> Result<Self, BridgeError> {
-        let io = |source: io::Error| match source.raw_os_error() {
-            Some(libc::ENODEV) => BridgeError::NoInterface {
-                iface: iface.to_owned(),
-            },
-            _ => BridgeError::Io {
-                iface: iface.to_owned(),
-                source,
-            },
-        };
+        let io = |source: io::Error| open_error(iface, source);
         let socket = CanSocket::open(iface).map_err(io)?;
         socket.set_nonblocking(true).map_err(io)?;
         Ok(CanPort::new(socket, iface))

@@ -8,12 +8,12 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use firmware_bridge::can::timed::{Horizon, TimedSocket};
 use firmware_bridge::clock::{Clock, WallClock};
 use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayHandle, GatewayStats};
 use firmware_bridge::laser::{LaserFrame, LaserPublisher, service_name};
 use firmware_bridge::{BridgeError, CanPort, Received};
 use golf_car_can::GolfCarMessage;
-use socketcan::CanSocket;
 
 use crate::devices::cola_driver::{ColaDriverStats, ColaDriverThread};
 use crate::devices::gps::{GpsError, GpsPort};
@@ -438,7 +438,8 @@ pub fn fix_latency(timings: &[FixTiming], epoch_unix_s: f64, start_ns: u64) -> O
 /// the run is over, `stop` is raised, or the controller exits. Returns the outcome
 /// and the monotonic time of tick 0 (see [`fix_latency`]).
 pub fn run_hil(
-    sim: &mut Sim<CanSocket>,
+    sim: &mut Sim<TimedSocket>,
+    horizon: &Horizon,
     wires: &mut Wires,
     mut controller: Option<&mut ControllerProcess>,
     stop: &AtomicBool,
@@ -462,6 +463,9 @@ pub fn run_hil(
         }
         let k = sim.next_tick();
         let late = clock.wait_tick(k);
+        // A late tick takes only the frames that arrived by its deadline: catching up,
+        // each tick gets those of its own period (firmware_bridge::can::timed).
+        horizon.set_for_tick(late);
         let now = k as f64 * sim.dt();
         let outcome = sim.step(clock.now(), late)?;
         let out = sim.take_outputs();
@@ -579,8 +583,9 @@ pub fn run_scenario(
         None => None,
     };
     let iface = sc.can.interface.clone();
+    let horizon = Horizon::new();
     let open = |what: &str| {
-        CanPort::open(&iface).map_err(|source| HilError::Can {
+        CanPort::open_timed(&iface, horizon.clone()).map_err(|source| HilError::Can {
             iface: format!("{iface} ({what})"),
             source,
         })
@@ -687,6 +692,7 @@ pub fn run_scenario(
     log(&rt_sched.promotion.describe("tick loop"));
     let run = run_hil(
         &mut sim,
+        &horizon,
         &mut wires,
         controller.as_mut(),
         stop,

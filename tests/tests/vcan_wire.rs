@@ -219,3 +219,45 @@ fn e2e_rejects_corrupted_replayed_and_skipped_frames_from_cansend() -> Result<()
     );
     Ok(())
 }
+
+/// The timed socket of the simulator's HIL loop: a frame is handed out once the
+/// horizon has passed its kernel receive time, in order, never before.
+#[test]
+fn a_timed_socket_hands_out_only_the_frames_that_arrived_by_its_horizon() -> Result<()> {
+    use embedded_can::nb::Can;
+    use firmware_bridge::can::timed::{Horizon, TimedSocket};
+    use std::time::SystemTime;
+
+    let vcan = TestVcan::new("timed")?;
+    let horizon = Horizon::new();
+    horizon.set(SystemTime::now());
+    let mut timed = TimedSocket::open(&vcan.name, horizon.clone())?;
+    let mut sender = CanPort::open(&vcan.name)?;
+    let mut sent_by = Vec::new();
+    for id in 1..=3u16 {
+        sender.send_bytes(id, &[id as u8])?;
+        std::thread::sleep(Duration::from_millis(20));
+        sent_by.push(SystemTime::now());
+    }
+    let take = |timed: &mut TimedSocket| -> Result<Option<u32>> {
+        match timed.receive() {
+            Ok(f) => Ok(Some(match embedded_can::Frame::id(&f) {
+                embedded_can::Id::Standard(s) => u32::from(s.as_raw()),
+                embedded_can::Id::Extended(e) => e.as_raw(),
+            })),
+            Err(nb::Error::WouldBlock) => Ok(None),
+            Err(nb::Error::Other(e)) => anyhow::bail!("receive: {e}"),
+        }
+    };
+    ensure!(take(&mut timed)?.is_none(), "a frame before the horizon");
+    // Twice: a held frame stays held.
+    ensure!(take(&mut timed)?.is_none(), "a held frame came out");
+    horizon.set(sent_by[0]);
+    ensure!(take(&mut timed)? == Some(1));
+    ensure!(take(&mut timed)?.is_none(), "frame 2 before its time");
+    horizon.set(sent_by[2]);
+    ensure!(take(&mut timed)? == Some(2));
+    ensure!(take(&mut timed)? == Some(3));
+    ensure!(take(&mut timed)?.is_none());
+    Ok(())
+}
