@@ -297,10 +297,11 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         eprintln!();
     }
     eprintln!(
-        "ugv-controller: {exit:?}; {:?}; CAN {:?}; inputs {:?}",
+        "ugv-controller: {exit:?}; {:?}; CAN {:?}; inputs {:?}; ticks skipped late {}",
         rt.controller().mode(),
         rt.can().stats(),
-        rt.stats
+        rt.stats,
+        rt.skipped_ticks
     );
     if let Some(e) = rt.trace_error() {
         eprintln!("ugv-controller: the trace is incomplete: {e}");

@@ -241,6 +241,8 @@ pub struct Runtime<G, L, B> {
     fix_timing: Option<Vec<FixTiming>>,
     unanswered: Vec<(f64, u64)>,
     pub stats: InputStats,
+    /// Ticks skipped because the loop came more than a period late (see [`Runtime::run`]).
+    pub skipped_ticks: u64,
 }
 
 impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
@@ -260,6 +262,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             fix_timing: None,
             unanswered: Vec::new(),
             stats: InputStats::default(),
+            skipped_ticks: 0,
         }
     }
 
@@ -483,7 +486,19 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
     ) -> Exit {
         let mut k: u64 = 0;
         loop {
-            clock.wait_tick(k);
+            let late = clock.wait_tick(k);
+            // A tick more than a period late (the machine stalled): the ticks missed
+            // are skipped, not run back to back, so the loop's time stays the wall
+            // clock's and what arrived during the stall is taken as arriving now. Run
+            // in a burst, those ticks would see no input while their time ran on, and
+            // the laser and report watchdogs would trip on sensors that never stopped.
+            // The lockstep clock is never late.
+            let missed = (late / COMMAND_PERIOD).floor();
+            if missed >= 1.0 && missed.is_finite() {
+                let missed = missed as u64;
+                self.skipped_ticks += missed;
+                k += missed;
+            }
             let now = k as f64 * COMMAND_PERIOD;
             k += 1;
             if stop.load(Ordering::Relaxed) {
@@ -501,5 +516,63 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         let mut t = Trace::of(&self.ctl, duration);
         t.fix_timing = self.fix_timing.clone().unwrap_or_default();
         t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ControllerConfig;
+    use firmware_bridge::can::membus::MemBus;
+
+    /// A clock that is late once: tick `at` comes `late` seconds after its deadline.
+    struct StallingClock {
+        at: u64,
+        late: f64,
+        asked: Vec<u64>,
+    }
+
+    impl Clock for StallingClock {
+        fn now(&self) -> f64 {
+            0.0
+        }
+
+        fn wait_tick(&mut self, k: u64) -> f64 {
+            self.asked.push(k);
+            if k == self.at { self.late } else { 0.0 }
+        }
+    }
+
+    #[test]
+    fn a_tick_that_comes_late_skips_the_ticks_it_missed() {
+        let bus = MemBus::new();
+        let mut rt = Runtime::new(
+            Controller::new(&ControllerConfig::default()).expect("controller"),
+            MemGps::new(ReaderConfig::default()),
+            MemLaser::default(),
+            CanPort::new(bus.endpoint(), "mem"),
+        );
+        let mut clock = StallingClock {
+            at: 5,
+            late: 0.105,
+            asked: Vec::new(),
+        };
+        let stop = AtomicBool::new(false);
+        let mut times = Vec::new();
+        rt.run(&mut clock, &stop, |k, now, _| {
+            times.push((now / COMMAND_PERIOD).round() as u64);
+            if k >= 30 {
+                stop.store(true, Ordering::Relaxed);
+            }
+        });
+        // Tick 5 came 105 ms late: ticks 5 to 14 are skipped, tick 15 runs at once.
+        assert_eq!(rt.skipped_ticks, 10);
+        assert_eq!(&times[..7], &[0, 1, 2, 3, 4, 15, 16]);
+        assert_eq!(&clock.asked[..7], &[0, 1, 2, 3, 4, 5, 16]);
+        // Never late again: nothing more skipped.
+        assert!(
+            times.windows(2).skip(5).all(|w| w[1] == w[0] + 1),
+            "{times:?}"
+        );
     }
 }
