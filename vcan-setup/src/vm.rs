@@ -73,6 +73,13 @@ pub struct VmArgs {
     /// Hardware virtualisation.
     #[arg(long, value_enum, default_value_t = Accel::Auto)]
     pub accel: Accel,
+    /// The niceness QEMU runs at on the host, -20 to 19: below 0 its vCPUs keep
+    /// their share while the host is busy (a build, a fuzzer), which the guest's
+    /// real-time runs need, above all under software emulation. Raising priority
+    /// needs root or CAP_SYS_NICE; without, `nice` says so and the VM runs at 0.
+    #[arg(long, default_value_t = -10, allow_hyphen_values = true,
+          value_parser = clap::value_parser!(i8).range(-20..=19))]
+    pub host_nice: i8,
     /// The command and its arguments.
     #[arg(last = true, required = true, value_name = "CMD")]
     pub command: Vec<OsString>,
@@ -230,7 +237,10 @@ fn boot(
         what: "locating vcan-setup itself".to_owned(),
         source,
     })?;
-    let mut cmd = Command::new(vng);
+    // Through coreutils' nice, which runs the command even when it may not set
+    // the niceness (and says why).
+    let mut cmd = Command::new("nice");
+    cmd.args(["-n", &args.host_nice.to_string()]).arg(vng);
     cmd.arg("--run").arg(kernel);
     if !kvm {
         cmd.arg("--disable-kvm");
@@ -277,7 +287,7 @@ fn boot(
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let mut child = cmd.spawn().map_err(|source| VcanError::Io {
-        what: format!("starting {}", vng.display()),
+        what: format!("starting {} through nice (coreutils)", vng.display()),
         source,
     })?;
     let out = child.stdout.take().map(|o| forward(o, false));

@@ -1,5 +1,6 @@
-//! The `vcan-setup` binary on its command line: the numbers of `vm` are bounded and
-//! refused with the argument named, before any VM is started (issue 11, item 8).
+//! The `vcan-setup` binary on its command line: the numbers of `vm` (memory, CPUs, the
+//! host niceness) are bounded and refused with the argument named, before any VM is
+//! started (issue 11, item 8).
 
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
@@ -8,7 +9,10 @@ use std::process::Command;
 
 #[test]
 fn vm_memory_and_cpus_out_of_range_are_refused_naming_the_argument() {
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 11] = [
+        (&["--host-nice", "-21"], "--host-nice"),
+        (&["--host-nice", "20"], "--host-nice"),
+        (&["--host-nice", "nice"], "--host-nice"),
         (&["--cpus", "0"], "--cpus"),
         (&["--cpus", "18446744073709551616"], "--cpus"),
         (&["--cpus", "100000"], "--cpus"),
