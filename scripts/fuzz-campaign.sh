@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fuzz campaigns (RELIABILITY.md): every cargo-fuzz target for RUNS executions
-# (default 10 million), JOBS targets at a time (default 2), each on its committed
+# (default 10 million) or MAX_TIME seconds if that comes first (default 0: no limit),
+# JOBS targets at a time (default 2), each on its committed
 # corpus (fuzz/corpus/<target>/), which the campaign grows; the corpus is minimised
 # afterwards (cargo fuzz cmin) so the stable replay test stays quick. Prints a
 # Markdown table row per target: executions, seconds, executions per second, crashes,
@@ -15,6 +16,7 @@ cd "$(dirname "$0")/.."
 source scripts/env.sh
 
 RUNS=${RUNS:-10000000}
+MAX_TIME=${MAX_TIME:-0}
 JOBS=${JOBS:-2}
 # No sanitizer (the workspace denies unsafe code; libFuzzer still finds panics,
 # overflows with debug assertions on, hangs and out-of-memory), for throughput.
@@ -42,7 +44,7 @@ run_one() {
     start=$(date +%s)
     # -rss_limit_mb and -timeout: an input that takes 2 GiB or 10 s is a finding.
     cargo +nightly fuzz run --fuzz-dir fuzz "${FLAGS[@]}" "$t" -- \
-        -runs="$RUNS" -print_final_stats=1 -rss_limit_mb=2048 -timeout=10 \
+        -runs="$RUNS" -max_total_time="$MAX_TIME" -print_final_stats=1 -rss_limit_mb=2048 -timeout=10 \
         >"$logs/$t.log" 2>&1 || true
     end=$(date +%s)
     cargo +nightly fuzz cmin --fuzz-dir fuzz "${FLAGS[@]}" "$t" >/dev/null 2>&1 || true

@@ -86,6 +86,10 @@ pub enum SpecError {
     Syntax(String),
     #[error("message {message}: extended (29-bit) ID {id:#x}; the golf car bus uses 11-bit IDs")]
     ExtendedId { message: String, id: u32 },
+    #[error(
+        "message {message}: ID {id:#x} ({id}) does not fit 11 bits (at most 0x7ff); an extended ID has bit 31 set in a DBC"
+    )]
+    IdBeyond11Bits { message: String, id: u16 },
     #[error("message {message}: DLC {dlc}; every frame on the golf car bus has 8 bytes")]
     WrongSize { message: String, dlc: u64 },
     #[error("message ID {id:#x} is defined twice ({first} and {second})")]
@@ -248,6 +252,12 @@ fn convert(dbc: &can_dbc::Dbc) -> Result<NetworkSpec, SpecError> {
     let mut messages: Vec<MessageSpec> = Vec::with_capacity(dbc.messages.len());
     for m in &dbc.messages {
         let id = match m.id {
+            can_dbc::MessageId::Standard(id) if id > 0x7FF => {
+                return Err(SpecError::IdBeyond11Bits {
+                    message: m.name.clone(),
+                    id,
+                });
+            }
             can_dbc::MessageId::Standard(id) => id,
             can_dbc::MessageId::Extended(id) => {
                 return Err(SpecError::ExtendedId {

@@ -506,6 +506,17 @@ fn malformed_dbc_is_refused_with_a_clear_error() {
     let dup = GOLF_CAR_DBC.replace("BO_ 273 THROTTLE_REPORT", "BO_ 272 THROTTLE_REPORT");
     let err = NetworkSpec::from_dbc(&dup).unwrap_err().to_string();
     assert!(err.contains("defined twice"), "{err}");
+
+    // Found by the dbc_spec fuzz target (fuzz/regressions/dbc_spec): a standard ID
+    // beyond 11 bits was taken, and a frame of it could never be sent.
+    let wide = GOLF_CAR_DBC.replace("BO_ 256 STEERING_CMD", "BO_ 7128 STEERING_CMD");
+    let err = NetworkSpec::from_dbc(&wide).unwrap_err().to_string();
+    assert!(
+        err.contains("STEERING_CMD") && err.contains("0x1bd8") && err.contains("11 bits"),
+        "{err}"
+    );
+    let widest = GOLF_CAR_DBC.replace("BO_ 256 STEERING_CMD", "BO_ 2048 STEERING_CMD");
+    assert!(NetworkSpec::from_dbc(&widest).is_err());
 }
 
 #[test]

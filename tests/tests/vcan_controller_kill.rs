@@ -93,8 +93,9 @@ fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> 
         }
         if let Some(status) = sim.try_wait()? {
             bail!(
-                "ugv-sim ended ({status}) before the controller drove {kill_after_samples} ticks:\n{}",
-                read(&dir, "stderr")
+                "ugv-sim ended ({status}) before the controller drove {kill_after_samples} ticks:\n{}\nverdict:\n{}",
+                read(&dir, "stderr"),
+                read(&dir, "stdout")
             );
         }
         if started.elapsed() > Duration::from_secs(90) {
