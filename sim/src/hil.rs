@@ -109,6 +109,8 @@ pub struct Wires {
     laser: LaserOut,
     driver: Option<ColaDriverThread>,
     gateways: Vec<GatewayHandle>,
+    /// Up to when the simulated ECUs' timed sockets hand out frames (set per tick).
+    can_horizon: Horizon,
 }
 
 impl std::fmt::Debug for Wires {
@@ -120,11 +122,13 @@ impl std::fmt::Debug for Wires {
 impl Wires {
     /// Open the wires of the scenario's device map: the GPS pty behind `gps_link` (or
     /// the serial device), the laser service of `run_id` (directly, or behind a CoLa-A
-    /// server and driver), and a gateway to each physical bus.
+    /// server and driver), and a gateway to each physical bus. `can_horizon` is the
+    /// horizon of the ECUs' timed sockets, which the run sets at each tick.
     pub fn open<B: embedded_can::nb::Can>(
         sim: &Sim<B>,
         gps_link: &Path,
         run_id: &str,
+        can_horizon: Horizon,
     ) -> Result<Wires, HilError> {
         let sc = &sim.scenario;
         let devices = &sc.devices;
@@ -228,6 +232,7 @@ impl Wires {
             laser,
             driver,
             gateways,
+            can_horizon,
         })
     }
 
@@ -439,7 +444,6 @@ pub fn fix_latency(timings: &[FixTiming], epoch_unix_s: f64, start_ns: u64) -> O
 /// and the monotonic time of tick 0 (see [`fix_latency`]).
 pub fn run_hil(
     sim: &mut Sim<TimedSocket>,
-    horizon: &Horizon,
     wires: &mut Wires,
     mut controller: Option<&mut ControllerProcess>,
     stop: &AtomicBool,
@@ -465,7 +469,7 @@ pub fn run_hil(
         let late = clock.wait_tick(k);
         // A late tick takes only the frames that arrived by its deadline: catching up,
         // each tick gets those of its own period (firmware_bridge::can::timed).
-        horizon.set_for_tick(late);
+        wires.can_horizon.set_for_tick(late);
         let now = k as f64 * sim.dt();
         let outcome = sim.step(clock.now(), late)?;
         let out = sim.take_outputs();
@@ -611,7 +615,7 @@ pub fn run_scenario(
         .gps_link
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id)));
-    let mut wires = Wires::open(&sim, &gps_link, &options.run_id)?;
+    let mut wires = Wires::open(&sim, &gps_link, &options.run_id, horizon)?;
     let m = &wires.map;
     log(&format!(
         "wires: GPS {} ({}, {} baud), laser iceoryx2 service {:?} ({}), CAN {} (golf_car.dbc); controller {}",
@@ -692,7 +696,6 @@ pub fn run_scenario(
     log(&rt_sched.promotion.describe("tick loop"));
     let run = run_hil(
         &mut sim,
-        &horizon,
         &mut wires,
         controller.as_mut(),
         stop,
