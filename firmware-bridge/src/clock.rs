@@ -30,6 +30,13 @@ pub fn monotonic_ns() -> u64 {
     })
 }
 
+/// A time on the real-time clock in nanoseconds since the Unix epoch (0 before it):
+/// the base of the kernel's receive timestamps and of the recordings' wall clock.
+pub fn unix_ns(t: std::time::SystemTime) -> u64 {
+    t.duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
 impl WallClock {
     pub fn new(dt: f64) -> WallClock {
         WallClock {

@@ -13,9 +13,11 @@
 use std::io;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::SystemTime;
 
 use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
+
+use crate::clock::unix_ns;
 
 /// The time up to which the timed sockets sharing it hand out frames, set by the loop
 /// at each tick. Until first set, there is no limit.
@@ -26,12 +28,6 @@ impl Default for Horizon {
     fn default() -> Self {
         Horizon(Arc::new(AtomicU64::new(u64::MAX)))
     }
-}
-
-/// Nanoseconds since the Unix epoch (0 before it).
-fn unix_ns(t: SystemTime) -> u64 {
-    t.duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 impl Horizon {
@@ -94,29 +90,22 @@ impl embedded_can::nb::Can for TimedSocket {
     type Error = socketcan::Error;
 
     fn receive(&mut self) -> nb::Result<CanFrame, socketcan::Error> {
-        let limit = self.horizon.get();
-        if let Some((_, at)) = &self.held {
-            if *at > limit {
-                return Err(nb::Error::WouldBlock);
-            }
-            if let Some((frame, _)) = self.held.take() {
-                return TimedSocket::hand_out(frame);
-            }
-        }
-        match self.socket.read_frame_with_timestamp() {
-            Ok((frame, at)) => {
-                let at = unix_ns(at);
-                if at > limit {
-                    // Frames arrive in order: this one and all after it wait.
-                    self.held = Some((frame, at));
-                    Err(nb::Error::WouldBlock)
-                } else {
-                    TimedSocket::hand_out(frame)
+        let (frame, at) = match self.held.take() {
+            Some(held) => held,
+            None => match self.socket.read_frame_with_timestamp() {
+                Ok((frame, at)) => (frame, unix_ns(at)),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    return Err(nb::Error::WouldBlock);
                 }
-            }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Err(nb::Error::WouldBlock),
-            Err(e) => Err(nb::Error::Other(socketcan::Error::from(e))),
+                Err(e) => return Err(nb::Error::Other(socketcan::Error::from(e))),
+            },
+        };
+        if at > self.horizon.get() {
+            // Frames arrive in order: this one and all after it wait.
+            self.held = Some((frame, at));
+            return Err(nb::Error::WouldBlock);
         }
+        TimedSocket::hand_out(frame)
     }
 
     fn transmit(&mut self, frame: &CanFrame) -> nb::Result<Option<CanFrame>, socketcan::Error> {
@@ -139,7 +128,7 @@ mod tests {
         assert!(h.get() + quarter >= before && h.get() + quarter <= after);
         // A clone is the same horizon.
         let c = h.clone();
-        c.set(UNIX_EPOCH);
+        c.set(std::time::UNIX_EPOCH);
         assert_eq!(h.get(), 0);
     }
 }

@@ -31,7 +31,9 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime};
+
+use firmware_bridge::clock::unix_ns;
 
 use foxglove::schemas::{
     Color, CylinderPrimitive, FrameTransform, LaserScan, LinePrimitive, LocationFix, Point3, Pose,
@@ -173,12 +175,6 @@ pub fn describe(s: &RecordSummary) -> String {
             .map(|e| format!(" (incomplete: {e})"))
             .unwrap_or_default()
     )
-}
-
-/// Nanoseconds since the UNIX epoch.
-fn unix_ns(t: SystemTime) -> u64 {
-    t.duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 fn timestamp(ns: u64) -> Timestamp {
