@@ -25,42 +25,7 @@ pub enum ConfigError {
 
 pub use firmware_bridge::geodesy::Datum;
 
-/// Where to go: the route from `start` through `waypoints` (in order) to `goal`; its
-/// legs are the reference the planner keeps close to (the paper's L: one leg, start
-/// to goal, without waypoints).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Mission {
-    pub datum: Datum,
-    pub start_x: f64,
-    pub start_y: f64,
-    /// Points to pass in order before the goal (`[[mission.waypoints]]`).
-    pub waypoints: Vec<crate::route::Waypoint>,
-    pub goal_x: f64,
-    pub goal_y: f64,
-    /// Heading at the goal, degrees CCW from East; default: along the line.
-    pub goal_heading_deg: Option<f64>,
-    /// Distance from the goal at which the mission is complete, metres.
-    pub goal_tolerance: f64,
-    /// Speed limit on the last leg (into the goal), m/s.
-    pub goal_speed_limit: Option<f64>,
-}
-
-impl Default for Mission {
-    fn default() -> Self {
-        Mission {
-            datum: Datum::default(),
-            start_x: 0.0,
-            start_y: 0.0,
-            waypoints: Vec::new(),
-            goal_x: 30.0,
-            goal_y: 15.0,
-            goal_heading_deg: None,
-            goal_tolerance: 1.0,
-            goal_speed_limit: None,
-        }
-    }
-}
+pub use crate::route::Mission;
 
 /// The golf car's calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -287,7 +252,7 @@ impl ControllerConfig {
     /// The first field that makes no sense, and why: every field is finite, has the
     /// right sign and lies within plausible bounds (the DBC's signal ranges where a
     /// field ends up on the bus), and the perception tuning passes perception's own
-    /// checks. [`crate::core::Controller::new`] runs this too, so nothing builds a
+    /// checks. `Controller::new` runs this too, so nothing builds a
     /// controller from a configuration `check-config` would refuse.
     pub fn validate(&self) -> Result<(), FieldError> {
         let m = &self.mission;

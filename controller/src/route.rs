@@ -2,12 +2,49 @@
 //! straight legs. Guidance plans towards local goals on it (a receding horizon) and
 //! measures the car's progress along it.
 
+use firmware_bridge::geodesy::Datum;
+use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive_up_to};
 
-use crate::config::Mission;
+/// Where to go: the route from `start` through `waypoints` (in order) to `goal`; its
+/// legs are the reference the planner keeps close to (the paper's L: one leg, start
+/// to goal, without waypoints).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Mission {
+    pub datum: Datum,
+    pub start_x: f64,
+    pub start_y: f64,
+    /// Points to pass in order before the goal (`[[mission.waypoints]]`).
+    pub waypoints: Vec<Waypoint>,
+    pub goal_x: f64,
+    pub goal_y: f64,
+    /// Heading at the goal, degrees CCW from East; default: along the line.
+    pub goal_heading_deg: Option<f64>,
+    /// Distance from the goal at which the mission is complete, metres.
+    pub goal_tolerance: f64,
+    /// Speed limit on the last leg (into the goal), m/s.
+    pub goal_speed_limit: Option<f64>,
+}
+
+impl Default for Mission {
+    fn default() -> Self {
+        Mission {
+            datum: Datum::default(),
+            start_x: 0.0,
+            start_y: 0.0,
+            waypoints: Vec::new(),
+            goal_x: 30.0,
+            goal_y: 15.0,
+            goal_heading_deg: None,
+            goal_tolerance: 1.0,
+            goal_speed_limit: None,
+        }
+    }
+}
 
 /// A point of the route the car must pass, before the goal.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Waypoint {
     pub x: f64,

@@ -174,10 +174,12 @@ mod tests {
                 assert_eq!(during, (libc::SCHED_FIFO, i32::from(p)));
                 assert_eq!(child, (libc::SCHED_OTHER, 0));
             }
+            // Refused without the privilege (or, for root too, in a container or
+            // cgroup without a real-time budget): the thread runs on unchanged.
             Promotion::Refused(why) => {
                 assert_eq!(during, before, "a refused promotion changed the thread");
-                // SAFETY: geteuid has no preconditions.
-                assert_ne!(unsafe { libc::geteuid() }, 0, "root was refused: {why}");
+                assert_eq!(child, before, "a refused promotion changed the child");
+                assert!(!why.is_empty(), "a refusal says why");
             }
             Promotion::Off => panic!("asked for {DEFAULT_PRIORITY}, got Off"),
         }

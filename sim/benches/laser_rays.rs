@@ -49,8 +49,8 @@ fn crowded() -> Scenario {
 }
 
 fn bench(name: &str, s: &Scenario, x: f64, y: f64, theta: f64) {
-    let world = World::new(s);
-    let mut dev = match LaserDevice::from_scenario(s) {
+    let world = World::new(&s.obstacles);
+    let mut dev = match s.laser_device() {
         Ok(d) => d,
         Err(e) => {
             eprintln!("{name}: {e}");

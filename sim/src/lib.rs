@@ -12,6 +12,7 @@ pub mod busload;
 pub mod devices;
 pub mod ecu;
 pub mod faults;
+pub mod measure;
 pub mod mission;
 pub mod mode;
 pub mod plot;

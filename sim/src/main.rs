@@ -28,11 +28,12 @@ use ugv_controller::config::FollowerKind;
 use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
 use ugv_sim::ecu::station::run_standalone;
-use ugv_sim::hil::{self, HilOptions};
+use ugv_sim::hil::{self, Endpoints, HilOptions};
 use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::run::Snapshot;
 use ugv_sim::sil::Hook;
-use ugv_sim::verdict::{Verdict, write_results};
+use ugv_sim::verdict::{RunEnd, judge_and_write};
+use ugv_sim::scenario::Overrides;
 use ugv_sim::{Mode, Outcome, Scenario};
 
 #[derive(Parser, Debug)]
@@ -345,7 +346,7 @@ fn run_ecu(
     let rt_sched = realtime::promote(rt_priority);
     eprintln!("ugv-sim: {}", rt_sched.promotion.describe("ECU loop"));
     let mut clock = WallClock::new(1.0 / sc.sim.physics_hz);
-    let fin = run_standalone(kind, &sc, port, &mut clock, &stop, status_every, &mut |s| {
+    let fin = run_standalone(kind, &sc.ecu_sections(), port, &mut clock, &stop, status_every, &mut |s| {
         let unit = match kind {
             EcuKind::Steering => "°",
             EcuKind::Throttle => " m/s",
@@ -417,30 +418,33 @@ fn exit_code(outcome: &Outcome) -> u8 {
 }
 
 fn run_scenario(args: RunArgs) -> Result<ExitCode> {
-    let mut sc = Scenario::load_or_paper(args.scenario.as_ref())?;
-    if let Some(file) = &args.faults {
-        let plan = ugv_sim::faults::plan::PlanFile::load(file)?;
-        sc = sc
-            .with_fault_plan(plan)
-            .map_err(|e| anyhow::anyhow!("{}: with the fault plan: {e}", file.display()))?;
-    }
-    if let Some(iface) = &args.can {
-        sc.can.interface = iface.clone();
-    }
-    if let Some(bench) = &args.devices {
-        sc.devices = DeviceMap::load(bench, &sc.can.interface)?;
-    } else {
-        sc.devices
-            .validate(&sc.can.interface)
-            .map_err(|e| anyhow::anyhow!("devices.{}.{}: {}", e.path[0], e.path[1], e.message))?;
-    }
+    let sc = Scenario::load_or_paper(args.scenario.as_ref())?;
+    let faults = match &args.faults {
+        Some(file) => Some(ugv_sim::faults::plan::PlanFile::load(file)?),
+        None => None,
+    };
+    // A bench file is checked on its own first (its errors name its lines), against
+    // the bus the run will have.
+    let iface = args.can.as_deref().unwrap_or(&sc.can.interface);
+    let devices = match &args.devices {
+        Some(bench) => Some(DeviceMap::load(bench, iface)?),
+        None => None,
+    };
     if let Some(limit) = args.time_limit {
         anyhow::ensure!(
             limit > 0.0 && limit.is_finite(),
             "--time-limit must be positive"
         );
-        sc.sim.time_limit_s = limit;
     }
+    let overrides = Overrides {
+        can: args.can.clone(),
+        devices,
+        time_limit_s: args.time_limit,
+        faults,
+    };
+    let sc = sc
+        .with_overrides(overrides)
+        .map_err(|e| anyhow::anyhow!("the scenario with the command line's changes: {e}"))?;
     let cfg = checked_controller_config(&sc, args.follower, args.anfis_model.clone())
         .map_err(|e| anyhow::anyhow!("the controller's configuration for the scenario: {e}"))?;
     std::fs::create_dir_all(&args.results)
@@ -470,21 +474,24 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         if let Some(s) = &run.recording {
             eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
         }
-        let report = run.sim.report(run.outcome.clone());
-        let verdict = Verdict::judge(Mode::Sil, &sc, report, Some(&run.trace));
+        let end = RunEnd {
+            mode: Mode::Sil,
+            report: run.sim.report(run.outcome.clone()),
+            driven: &run.sim.trajectory,
+            trace: Some(&run.trace),
+        };
+        let verdict = judge_and_write(
+            &sc,
+            end,
+            cfg.perception.detection_radius,
+            &args.results,
+            |_| {},
+        )?;
         eprintln!(
             "ugv-sim: SIL {:.1} s simulated in {wall:.2} s ({:.0}x real time)",
             verdict.time(),
             verdict.time() / wall.max(1e-9)
         );
-        write_results(
-            &args.results,
-            &sc,
-            &verdict,
-            &run.sim.trajectory,
-            Some(&run.trace),
-            cfg.perception.detection_radius,
-        )?;
         println!("{}", serde_json::to_string_pretty(&verdict)?);
         return Ok(ExitCode::from(exit_code(&run.outcome)));
     }
@@ -507,17 +514,20 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     };
     let stop = stop_on_signal()?;
     let tty = std::io::stderr().is_terminal();
+    let mut log = |line: &str| {
+        if tty {
+            eprint!("\r\x1b[2K");
+        }
+        eprintln!("ugv-sim: {line}");
+    };
+    let endpoints = Endpoints::open(&sc, &options, &mut log)?;
     let (verdict, outcome) = hil::run_scenario(
         &sc,
         &cfg,
+        endpoints,
         &options,
         &stop,
-        &mut |line| {
-            if tty {
-                eprint!("\r\x1b[2K");
-            }
-            eprintln!("ugv-sim: {line}");
-        },
+        &mut log,
         &mut |s| {
             if tty {
                 eprint!("\r\x1b[2K{}", status_line(s));
@@ -604,10 +614,14 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         None => std::env::current_exe()?.with_file_name("ugv-controller"),
     };
     let hil_runner = |id: &str, sc: &Scenario, slot: usize| {
-        let mut sc = sc.clone();
-        if let Some(can) = cans.get(slot) {
-            sc.can.interface = can.clone();
-        }
+        let overrides = Overrides {
+            can: cans.get(slot).cloned(),
+            ..Overrides::default()
+        };
+        let sc = sc
+            .clone()
+            .with_overrides(overrides)
+            .map_err(|e| format!("with --can: {e}"))?;
         // The item's id as a name for folders, services and namespaces.
         let slug = suite::item_dir_name(id);
         let run_id = format!("suite-{slug}-{}", std::process::id());
@@ -624,7 +638,8 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             rt_priority: realtime::DEFAULT_PRIORITY,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
-        hil::run_scenario(&sc, &tune(&sc), &options, &stop, &mut |_| {}, &mut |_| {})
+        let endpoints = Endpoints::open(&sc, &options, &mut |_| {}).map_err(|e| e.to_string())?;
+        hil::run_scenario(&sc, &tune(&sc), endpoints, &options, &stop, &mut |_| {}, &mut |_| {})
             .map(|(verdict, _)| verdict)
             .map_err(|e| e.to_string())
     };

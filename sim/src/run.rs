@@ -63,48 +63,8 @@ pub enum Outcome {
     },
 }
 
-/// Percentiles of a timing distribution, milliseconds.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct Jitter {
-    pub samples: usize,
-    pub p50_ms: f64,
-    pub p99_ms: f64,
-    pub max_ms: f64,
-}
-
-impl Jitter {
-    /// From absolute deviations in seconds.
-    pub fn of(mut deviations: Vec<f64>) -> Jitter {
-        if deviations.is_empty() {
-            return Jitter::default();
-        }
-        deviations.sort_by(f64::total_cmp);
-        let pick =
-            |q: f64| deviations[((deviations.len() - 1) as f64 * q).round() as usize] * 1000.0;
-        Jitter {
-            samples: deviations.len(),
-            p50_ms: pick(0.5),
-            p99_ms: pick(0.99),
-            max_ms: pick(1.0),
-        }
-    }
-}
-
-/// A node's CAN statistics.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct NodeStats {
-    pub e2e: E2eStats,
-    pub undecodable: u64,
-    pub bus_errors: u64,
-    pub sent: u64,
-    /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
-    /// fault report, second sender, its own hardware fault (the simulated ECU's; zero
-    /// for a physical one).
-    pub safe_state_trips: [u64; 6],
-    /// Reports received from the physical ECU (absent when the ECU is simulated).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub physical_reports: Option<u64>,
-}
+use crate::ecu::station::NodeStats;
+use crate::measure::Jitter;
 
 /// What the terminal shows and the verdict is built from.
 #[derive(Clone, Debug, Serialize)]
@@ -203,10 +163,11 @@ const STOPPED: f64 = 0.05;
 impl<B: Can> Sim<B> {
     /// A run of `scenario` with the steering and throttle ECUs on their own bus endpoints.
     pub fn new(scenario: Scenario, steering: CanPort<B>, throttle: CanPort<B>) -> Sim<B> {
-        let world = World::new(&scenario);
+        let world = World::new(&scenario.obstacles);
         let vehicle = VehicleState::at(&scenario.start);
         let min_clearance = world.clearances(&scenario.vehicle, &vehicle);
-        let station = |kind, device: &EcuDevice, port| Station::new(kind, device, &scenario, port);
+        let sections = scenario.ecu_sections();
+        let station = |kind, device: &EcuDevice, port| Station::new(kind, device, &sections, port);
         Sim {
             steering: station(EcuKind::Steering, &scenario.devices.steering, steering),
             throttle: station(EcuKind::Throttle, &scenario.devices.throttle, throttle),
@@ -234,8 +195,8 @@ impl<B: Can> Sim<B> {
     /// Add the scenario's GPS receiver and laser scanner: each step then leaves their
     /// output in [`Sim::take_outputs`].
     pub fn with_sensors(mut self) -> Result<Sim<B>, SimError> {
-        self.gps = Some(GpsDevice::from_scenario(&self.scenario)?);
-        self.laser = Some(LaserDevice::from_scenario(&self.scenario)?);
+        self.gps = Some(self.scenario.gps_device()?);
+        self.laser = Some(self.scenario.laser_device()?);
         self.faults = Injector::new(
             crate::faults::plan::typed_plan(&self.scenario.faults)?,
             self.scenario.sim.seed,
@@ -387,7 +348,7 @@ impl<B: Can> Sim<B> {
     pub fn safe_state(&self) -> Option<SafeStateReport> {
         let w = self.wind_down.as_ref()?;
         let ecu = |st: &Station<B>, command: u16| {
-            let t = crate::ecu::safety_timing(&self.scenario, command);
+            let t = crate::ecu::safety_timing(&self.scenario.can, command);
             let period = crate::ecu::period_of::<golf_car_can::SteeringReport>();
             let bound_ms = (t.command_timeout + period) * 1e3;
             let last = st.last_command();

@@ -8,7 +8,7 @@
 //! radius L / tan(phi), or a straight line), so the model has no integration error:
 //! constant steering traces a circle of radius L / tan(phi) to rounding.
 
-use crate::scenario::{Pose, VehicleConfig};
+use crate::scenario::schema::{Pose, VehicleConfig};
 
 /// The vehicle's state in the world frame.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]

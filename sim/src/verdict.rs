@@ -43,10 +43,10 @@ pub struct Verdict {
     pub controller: Option<ControllerSummary>,
     /// HIL: from a GPS fix to the controller's first steering command with it.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub fix_latency: Option<crate::hil::FixLatency>,
+    pub fix_latency: Option<crate::measure::FixLatency>,
     /// HIL: the gateways to physical buses and the laser driver, when in use.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub wires: Option<crate::hil::WireStats>,
+    pub wires: Option<crate::measure::WireStats>,
 }
 
 /// RMS of the commanded steering rate over the control samples, deg/s.
@@ -205,6 +205,38 @@ fn write(path: &Path, text: &str) -> Result<(), ResultsError> {
         path: path.display().to_string(),
         source,
     })
+}
+
+/// How a run ended, for [`judge_and_write`]: its mode, the simulator's report, the
+/// driven path, and the controller's trace when there is one.
+pub struct RunEnd<'a> {
+    pub mode: Mode,
+    pub report: RunReport,
+    pub driven: &'a [(f64, VehicleState)],
+    pub trace: Option<&'a Trace>,
+}
+
+/// Judge a finished run of `scenario` (HIL or SIL alike), let `measured` add what
+/// only the mode knows (the HIL latency figures and wire statistics), and write the
+/// results into `dir` (see [`write_results`]).
+pub fn judge_and_write(
+    scenario: &Scenario,
+    end: RunEnd<'_>,
+    detection_radius: f64,
+    dir: &Path,
+    measured: impl FnOnce(&mut Verdict),
+) -> Result<Verdict, ResultsError> {
+    let mut verdict = Verdict::judge(end.mode, scenario, end.report, end.trace);
+    measured(&mut verdict);
+    write_results(
+        dir,
+        scenario,
+        &verdict,
+        end.driven,
+        end.trace,
+        detection_radius,
+    )?;
+    Ok(verdict)
 }
 
 /// Write `verdict.json`, `trace.json` and `training.csv` (when there is a trace),

@@ -10,7 +10,7 @@
 use rapier2d::parry;
 use rapier2d::prelude::*;
 
-use crate::scenario::{Motion, Obstacle, Scenario, VehicleConfig};
+use crate::scenario::schema::{Motion, Obstacle, VehicleConfig};
 use crate::vehicle::VehicleState;
 
 /// One obstacle of the scenario in the physics world.
@@ -92,12 +92,12 @@ pub fn position_at(x0: f64, y0: f64, motion: &Option<Motion>, t: f64) -> (f64, f
 }
 
 impl World {
-    /// Build the world of a scenario at t = 0.
-    pub fn new(scenario: &Scenario) -> World {
+    /// Build the world of a scenario's obstacles at t = 0.
+    pub fn new(obstacles: &[Obstacle]) -> World {
         let mut physics = PhysicsWorld::new();
         physics.gravity = Vector::ZERO;
-        let mut bodies = Vec::with_capacity(scenario.obstacles.len());
-        for (i, o) in scenario.obstacles.iter().enumerate() {
+        let mut bodies = Vec::with_capacity(obstacles.len());
+        for (i, o) in obstacles.iter().enumerate() {
             let tag = i as u128;
             let (body, shapes): (RigidBodyBuilder, Vec<ColliderBuilder>) = match o {
                 Obstacle::Circle {
@@ -292,7 +292,7 @@ mod tests {
     #[test]
     fn paper_scenario_footprint_collides_only_inside_the_post() {
         let s = Scenario::default();
-        let w = World::new(&s);
+        let w = World::new(&s.obstacles);
         let at = |x, y| {
             VehicleState::at(&ScenarioPose {
                 x,
@@ -316,7 +316,7 @@ mod tests {
             points: vec![[-5.0, 10.0], [5.0, 10.0], [5.0, 20.0]],
             thickness: 0.4,
         });
-        let w = World::new(&s);
+        let w = World::new(&s.obstacles);
         // Straight at the post from (10, 8): hits at 19 - 3 - 10 = 6.
         let (i, r) = w.cast_ray(10.0, 8.0, 0.0, 20.0).expect("hit");
         assert_eq!(i, 0);
@@ -342,7 +342,7 @@ mod tests {
             }],
             ..Scenario::default()
         };
-        let mut w = World::new(&s);
+        let mut w = World::new(&s.obstacles);
         assert!(
             w.cast_ray(5.0, 0.0, std::f64::consts::FRAC_PI_2, 20.0)
                 .is_none()

@@ -47,7 +47,7 @@ fn fixes_at_known_poses_round_trip_through_the_reader() -> Result<()> {
     ];
     for (x, y, th, v, phi) in poses {
         let s = vehicle(x, y, th, v, phi);
-        let mut dev = GpsDevice::from_scenario(&scn)?;
+        let mut dev = scn.gps_device()?;
         let epoch = dev.poll(0.0, &s)?.context("an epoch at t = 0")?;
         let reading = read_one(&mut reader(&cfg), &epoch.text)?;
         let what = format!("pose {x} {y} {th} {v} {phi}");
@@ -332,7 +332,7 @@ fn same_seed_same_bytes_other_seed_other_bytes() -> Result<()> {
     let drive = |seed: u64| -> Result<String> {
         let mut scn = scenario(cfg.clone());
         scn.sim.seed = seed;
-        let mut dev = GpsDevice::from_scenario(&scn)?;
+        let mut dev = scn.gps_device()?;
         let wheelbase = scn.vehicle.wheelbase;
         let mut s = vehicle(0.0, 0.0, 0.0, 2.0, 10.0);
         let mut text = String::new();
@@ -453,7 +453,7 @@ fn rate_and_baud_that_cannot_fit_are_refused_with_the_numbers() -> Result<()> {
     }
     .validate()
     .expect_err("refused");
-    assert_eq!(err.field, "baud");
+    assert_eq!(err.path.to_string(), "baud");
     Ok(())
 }
 

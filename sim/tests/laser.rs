@@ -21,7 +21,7 @@ fn noiseless(mut cfg: LaserConfig) -> LaserConfig {
 /// The scenario's laser (a macro, so the `expect` sits in the test itself).
 macro_rules! device {
     ($s:expr) => {
-        LaserDevice::from_scenario($s).expect("valid laser configuration")
+        $s.laser_device().expect("valid laser configuration")
     };
 }
 
@@ -95,7 +95,7 @@ fn ranges_match_ray_circle_intersections_with_noise_off() {
         }),
         ..Scenario::default()
     };
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let mut dev = device!(&s);
     let (x, y, theta) = (9.0, 6.0, 0.3);
     let f = dev.scan(&world, 0.0, x, y, theta);
@@ -166,7 +166,7 @@ fn ranges_match_ray_segment_intersections_on_boxes_and_walls_with_noise_off() {
         ),
         (rectangle((-3.0, -6.0), 1.0, 1.5, 0.0), 150.0),
     ];
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let mut dev = device!(&s);
     let (x, y, theta) = (0.0, 0.0, 0.2);
     let f = dev.scan(&world, 0.0, x, y, theta);
@@ -231,7 +231,7 @@ fn range_noise_has_zero_mean_and_the_configured_sigma_for_a_fixed_seed() {
     let noisy = room();
     let mut clean = room();
     clean.laser = noiseless(clean.laser);
-    let world = World::new(&noisy);
+    let world = World::new(&noisy.obstacles);
     let (mut a, mut b) = (device!(&noisy), device!(&clean));
     let mut residuals = Vec::new();
     for k in 0..200 {
@@ -271,7 +271,7 @@ fn bits_equal(a: &LaserFrame, b: &LaserFrame) -> bool {
 fn the_same_seed_gives_identical_frames_and_another_seed_does_not() {
     let mut s = room();
     s.laser.dropout_probability = 0.05;
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let (mut a, mut b) = (device!(&s), device!(&s));
     let mut other = s.clone();
     other.sim.seed = 2;
@@ -295,7 +295,7 @@ fn the_same_seed_gives_identical_frames_and_another_seed_does_not() {
 fn dropouts_are_nan_at_the_configured_rate_and_only_on_targets() {
     let mut s = room();
     s.laser.dropout_probability = 0.2;
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let mut dev = device!(&s);
     let (mut nan, mut total) = (0usize, 0usize);
     for k in 0..20 {
@@ -312,7 +312,7 @@ fn dropouts_are_nan_at_the_configured_rate_and_only_on_targets() {
     // Open space: beams without a target stay "no return", never dropouts.
     let mut open = Scenario::default();
     open.laser.dropout_probability = 1.0;
-    let world = World::new(&open);
+    let world = World::new(&open.obstacles);
     let f = device!(&open).scan(&world, 0.0, 0.0, 0.0, std::f64::consts::PI);
     assert!(f.ranges().iter().all(|r| *r == f32::INFINITY));
 }
@@ -331,7 +331,7 @@ fn targets_closer_than_range_min_are_no_return() {
     };
     s.success.reach_goal = false;
     s.laser = noiseless(s.laser);
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let f = device!(&s).scan(&world, 0.0, 0.0, 0.0, 0.0);
     assert_eq!(
         f.ranges[270],
@@ -354,7 +354,7 @@ fn moving_obstacles_are_seen_where_they_are_at_scan_time() {
         motion: Some(Motion::Velocity { vx: 0.0, vy: 2.0 }),
     }];
     s.laser = noiseless(s.laser);
-    let mut world = World::new(&s);
+    let mut world = World::new(&s.obstacles);
     let mut dev = device!(&s);
     assert_eq!(
         dev.scan(&world, 0.0, 0.0, 0.0, 0.0).ranges[270],
@@ -370,7 +370,7 @@ fn moving_obstacles_are_seen_where_they_are_at_scan_time() {
 #[test]
 fn frame_header_follows_the_lms111_defaults() {
     let s = Scenario::default();
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let f = device!(&s).scan(&world, 0.0, 0.0, 0.0, 0.0);
     assert_eq!((f.version, f.count), (1, 541));
     assert!((f64::from(f.angle_min) + 135f64.to_radians()).abs() < 1e-6);
@@ -402,7 +402,7 @@ fn the_lms291_profile_and_overrides_load_from_toml() {
         s.laser.mount_x, 2.0,
         "unset mount fields keep their defaults"
     );
-    let world = World::new(&s);
+    let world = World::new(&s.obstacles);
     let f = device!(&s).scan(&world, 0.0, 0.0, 0.0, 0.0);
     assert_eq!(f.count, 361);
     assert!((f64::from(f.angle_min) + 90f64.to_radians()).abs() < 1e-6);

@@ -19,7 +19,7 @@ fn fixes_cross_a_serial_cable_to_the_controller_and_its_input_comes_back() -> Re
     let cable = NullModem::new()?;
     let sc = Scenario::paper()?;
     let baud = 115_200;
-    let mut dev = GpsDevice::from_scenario(&sc)?;
+    let mut dev = sc.gps_device()?;
     let mut port = GpsPort::serial(&cable.a, baud)?;
     ensure!(port.path() == cable.a);
 

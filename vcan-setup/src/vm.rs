@@ -10,12 +10,16 @@
 //! Quirks of vng handled here: stdin must be open (it is /dev/null), stdout and
 //! stderr must be pipes (QEMU reopens file descriptors with truncation), and the
 //! guest does not inherit the environment (the toolchain's variables are passed).
+//! Some hosts offer /dev/kvm and then hang the guest at boot: a KVM boot that has not
+//! reached the guest within [`KVM_BOOT_LIMIT`] is stopped and the software-emulated
+//! boot follows.
 
 use std::ffi::OsString;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::os::unix::process::CommandExt;
 use std::process::{Command, Stdio};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::VcanError;
 
@@ -172,6 +176,13 @@ fn version_key(release: &str) -> Vec<u64> {
         .collect()
 }
 
+/// The file the guest leaves in the status directory once it runs (before the command).
+const BOOTED: &str = "booted";
+
+/// How long a KVM boot may take to reach the guest before it counts as hung; the
+/// software-emulated attempt follows. KVM boots in seconds, where it works at all.
+const KVM_BOOT_LIMIT: Duration = Duration::from_secs(60);
+
 fn kvm_usable() -> bool {
     std::fs::OpenOptions::new()
         .read(true)
@@ -286,16 +297,41 @@ fn boot(
     cmd.stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
+    // A group of its own: a hung boot is stopped with vng's QEMU and all.
+    cmd.process_group(0);
     let mut child = cmd.spawn().map_err(|source| VcanError::Io {
         what: format!("starting {} through nice (coreutils)", vng.display()),
         source,
     })?;
     let out = child.stdout.take().map(|o| forward(o, false));
     let err = child.stderr.take().map(|e| forward(e, true));
-    let status = child.wait().map_err(|source| VcanError::Io {
+    let waited = |e| VcanError::Io {
         what: "waiting for the VM".to_owned(),
-        source,
-    })?;
+        source: e,
+    };
+    let started = Instant::now();
+    let status = loop {
+        if !kvm || status_dir.join(BOOTED).exists() {
+            break child.wait().map_err(waited)?;
+        }
+        if let Some(status) = child.try_wait().map_err(waited)? {
+            break status;
+        }
+        if started.elapsed() > KVM_BOOT_LIMIT {
+            eprintln!(
+                "vcan-setup: the KVM guest did not start the command within {} s (some hosts offer /dev/kvm and hang the guest); stopping it",
+                KVM_BOOT_LIMIT.as_secs()
+            );
+            if let Ok(pid) = i32::try_from(child.id()) {
+                let _ = nix::sys::signal::killpg(
+                    nix::unistd::Pid::from_raw(pid),
+                    nix::sys::signal::Signal::SIGKILL,
+                );
+            }
+            break child.wait().map_err(waited)?;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
     for handle in [out, err].into_iter().flatten() {
         let _ = handle.join();
     }
@@ -363,8 +399,13 @@ pub fn run(args: &VmArgs) -> Result<u8, VcanError> {
     }
 }
 
-/// Inside the VM: bring up the interfaces, run the command, record its exit code.
+/// Inside the VM: say it booted, bring up the interfaces, run the command, record its
+/// exit code.
 pub fn guest(args: &GuestArgs) -> Result<u8, VcanError> {
+    std::fs::write(args.status_dir.join(BOOTED), b"").map_err(|source| VcanError::Io {
+        what: format!("writing {} to {}", BOOTED, args.status_dir.display()),
+        source,
+    })?;
     for iface in &args.ifaces {
         crate::up(iface)?;
     }

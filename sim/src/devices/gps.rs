@@ -15,7 +15,7 @@
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! use ugv_sim::devices::gps::{GpsDevice, GpsPort};
 //! let scenario = ugv_sim::Scenario::paper()?;
-//! let mut gps = GpsDevice::from_scenario(&scenario)?;
+//! let mut gps = scenario.gps_device()?;
 //! let mut port = GpsPort::open(Some("/tmp/ugv-gps".as_ref()), scenario.gps.baud)?;
 //! let vehicle = ugv_sim::vehicle::VehicleState::at(&scenario.start);
 //! for tick in 0..200u32 {
@@ -63,7 +63,9 @@ pub use noise::{EpochError, ErrorModel, GPS_STREAM};
 pub use pacer::Pacer;
 pub use port::{GpsPort, INPUT_LOG_LINES, InputLog};
 
-use crate::scenario::{Datum, Scenario, SimConfig};
+use crate::scenario::schema::{Datum, SimConfig};
+use super::FieldError;
+use ugv_fields::FieldPath;
 use crate::vehicle::VehicleState;
 
 /// Slack for deciding that an epoch is due, seconds.
@@ -72,11 +74,8 @@ const EPS_S: f64 = 1e-9;
 /// Why the GPS device could not be built or could not produce an epoch.
 #[derive(Debug, thiserror::Error)]
 pub enum GpsError {
-    #[error("gps.{field}: {message}")]
-    Config {
-        field: &'static str,
-        message: String,
-    },
+    #[error("{0}")]
+    Config(FieldError),
     #[error("datum: {0}")]
     Datum(#[from] GeodesyError),
     #[error("sim time {0} is not a finite number")]
@@ -149,10 +148,9 @@ impl GpsDevice {
         sim: &SimConfig,
         wheelbase_m: f64,
     ) -> Result<GpsDevice, GpsError> {
-        config.validate().map_err(|e| GpsError::Config {
-            field: e.field,
-            message: e.message,
-        })?;
+        config
+            .validate()
+            .map_err(|e| GpsError::Config(e.under(&FieldPath::of(&["gps"]))))?;
         if !(wheelbase_m.is_finite() && wheelbase_m > 0.0) {
             return Err(GpsError::Wheelbase(wheelbase_m));
         }
@@ -170,16 +168,6 @@ impl GpsDevice {
             fix_override: None,
             offset_m: (0.0, 0.0),
         })
-    }
-
-    /// The receiver of a scenario.
-    pub fn from_scenario(scenario: &Scenario) -> Result<GpsDevice, GpsError> {
-        GpsDevice::new(
-            &scenario.gps,
-            &scenario.datum,
-            &scenario.sim,
-            scenario.vehicle.wheelbase,
-        )
     }
 
     pub fn config(&self) -> &GpsConfig {

@@ -20,6 +20,9 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use ugv_fields::{FieldError, FieldPath};
+
+use crate::scenario::fields::{ScenarioError, parse, read};
 
 /// An actuator ECU: played by the simulator on its bus, or a physical ECU on a
 /// physical SocketCAN interface that the gateway joins to the simulator's bus. With a
@@ -131,13 +134,6 @@ pub struct DeviceMap {
     pub controller: ControllerSite,
 }
 
-/// A field of the device map that failed validation: its path below `devices` and why.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DeviceError {
-    pub path: [&'static str; 2],
-    pub message: String,
-}
-
 fn interface_ok(name: &str) -> bool {
     !name.is_empty() && name.len() <= 15 && !name.contains(['/', ' ', '\0'])
 }
@@ -150,11 +146,11 @@ struct BenchFile {
 }
 
 impl DeviceMap {
-    /// Check the map against itself and the simulator's bus `sim_can`.
-    pub fn validate(&self, sim_can: &str) -> Result<(), DeviceError> {
-        let err = |device, field, message: String| DeviceError {
-            path: [device, field],
-            message,
+    /// Check the map against itself and the simulator's bus `sim_can`; the error's
+    /// path is below `devices`.
+    pub fn validate(&self, sim_can: &str) -> Result<(), FieldError> {
+        let err = |device, field, message: String| {
+            FieldError::new(FieldPath::of(&[device, field]), message)
         };
         for (device, can) in self.physical_can() {
             if !interface_ok(can) {
@@ -239,20 +235,14 @@ impl DeviceMap {
     }
 
     /// Read a bench file (`[devices]` alone), checked against the simulator's bus.
-    pub fn load(path: &Path, sim_can: &str) -> Result<DeviceMap, crate::ScenarioError> {
+    pub fn load(path: &Path, sim_can: &str) -> Result<DeviceMap, ScenarioError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| crate::ScenarioError::Read {
-            file: file.clone(),
-            source,
+        let text = read(path)?;
+        let bench: BenchFile = parse(&text, &file)?;
+        bench.devices.validate(sim_can).map_err(|e| {
+            e.under(&FieldPath::of(&["devices"]))
+                .located(&text, &file)
         })?;
-        let bench: BenchFile = toml::from_str(&text).map_err(|e| crate::ScenarioError::Parse {
-            file: file.clone(),
-            message: e.to_string().trim_end().to_owned(),
-        })?;
-        bench
-            .devices
-            .validate(sim_can)
-            .map_err(|e| crate::scenario::invalid_device(&text, &file, &e))?;
         Ok(bench.devices)
     }
 }
@@ -348,7 +338,7 @@ controller = { mode = "board", can = "can0" }
             ..DeviceMap::default()
         };
         let e = own_bus.validate("vcan0").unwrap_err();
-        assert_eq!(e.path, ["steering", "can"]);
+        assert_eq!(e.path.to_string(), "steering.can");
         assert!(e.message.contains("own bus"), "{}", e.message);
 
         let long = DeviceMap {
@@ -358,8 +348,8 @@ controller = { mode = "board", can = "can0" }
             ..DeviceMap::default()
         };
         assert_eq!(
-            long.validate("vcan0").unwrap_err().path,
-            ["throttle", "can"]
+            long.validate("vcan0").unwrap_err().path.to_string(),
+            "throttle.can"
         );
 
         let board_on_pty = DeviceMap {
@@ -367,7 +357,7 @@ controller = { mode = "board", can = "can0" }
             ..DeviceMap::default()
         };
         let e = board_on_pty.validate("vcan0").unwrap_err();
-        assert_eq!(e.path, ["gps", "mode"]);
+        assert_eq!(e.path.to_string(), "gps.mode");
 
         let slow = DeviceMap {
             gps: GpsOutput::Serial {
@@ -377,7 +367,7 @@ controller = { mode = "board", can = "can0" }
             },
             ..DeviceMap::default()
         };
-        assert_eq!(slow.validate("vcan0").unwrap_err().path, ["gps", "baud"]);
+        assert_eq!(slow.validate("vcan0").unwrap_err().path.to_string(), "gps.baud");
     }
 
     #[test]

@@ -6,19 +6,15 @@ pub mod gps;
 pub mod laser;
 pub mod map;
 
-/// A field of a device's configuration that failed validation: its name within the
-/// device's section and why.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FieldError {
-    pub field: &'static str,
-    pub message: String,
-}
+pub use ugv_fields::FieldError;
+use ugv_fields::FieldPath;
 
-impl FieldError {
-    pub fn new(field: &'static str, message: impl Into<String>) -> FieldError {
-        FieldError {
-            field,
-            message: message.into(),
-        }
-    }
+/// The error of the field at `field` of a device's section, its keys joined by dots
+/// (`rtk.hdop`); the scenario or bench file places the section with
+/// [`FieldError::under`].
+pub fn invalid(field: &'static str, message: impl Into<String>) -> FieldError {
+    let path = field
+        .split('.')
+        .fold(FieldPath::root(), |path, key| path.key(key));
+    FieldError::new(path, message)
 }

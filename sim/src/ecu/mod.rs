@@ -12,7 +12,7 @@ use golf_car_can::{
     SteeringReport, ThrottleReport,
 };
 
-use crate::scenario::Scenario;
+use crate::scenario::schema::{CanConfig, SimConfig, SteeringConfig, ThrottleConfig, VehicleConfig};
 use safety::{Safety, SafetyTiming};
 pub use steering::SteeringEcu;
 pub use throttle::ThrottleEcu;
@@ -22,8 +22,20 @@ pub fn period_of<M: CanMessage>() -> f64 {
     f64::from(M::spec().cycle_time_ms.unwrap_or(10)) / 1000.0
 }
 
-/// The watchdog timing from the DBC's receiver timeouts and the scenario.
-pub fn safety_timing(scenario: &Scenario, command: u16) -> SafetyTiming {
+/// What the ECUs take of a scenario: their actuators' sections, the vehicle's limits
+/// their commands are clamped to, the bus's fault-clear time, and the physics rate a
+/// standalone ECU ticks at.
+#[derive(Clone, Copy, Debug)]
+pub struct EcuSections<'a> {
+    pub steering: &'a SteeringConfig,
+    pub throttle: &'a ThrottleConfig,
+    pub vehicle: &'a VehicleConfig,
+    pub can: &'a CanConfig,
+    pub sim: &'a SimConfig,
+}
+
+/// The watchdog timing from the DBC's receiver timeouts and the `[can]` section.
+pub fn safety_timing(can: &CanConfig, command: u16) -> SafetyTiming {
     let timeout = |id: u16| {
         NETWORK
             .message(id)
@@ -33,7 +45,7 @@ pub fn safety_timing(scenario: &Scenario, command: u16) -> SafetyTiming {
     SafetyTiming {
         command_timeout: timeout(command),
         heartbeat_timeout: timeout(golf_car_can::ControllerHeartbeat::ID),
-        fault_clear: f64::from(scenario.can.fault_clear_ms) / 1000.0,
+        fault_clear: f64::from(can.fault_clear_ms) / 1000.0,
     }
 }
 
@@ -67,17 +79,18 @@ pub struct EcuNode {
 }
 
 impl EcuNode {
-    pub fn new(kind: EcuKind, scenario: &Scenario) -> EcuNode {
+    pub fn new(kind: EcuKind, sections: &EcuSections<'_>) -> EcuNode {
+        let s = sections;
         let ecu = match kind {
             EcuKind::Steering => Ecu::Steering(SteeringEcu::new(
-                scenario.steering.clone(),
-                scenario.vehicle.max_steer_deg,
-                Safety::new(safety_timing(scenario, golf_car_can::SteeringCmd::ID)),
+                s.steering.clone(),
+                s.vehicle.max_steer_deg,
+                Safety::new(safety_timing(s.can, golf_car_can::SteeringCmd::ID)),
             )),
             EcuKind::Throttle => Ecu::Throttle(ThrottleEcu::new(
-                scenario.throttle.clone(),
-                scenario.vehicle.max_speed,
-                Safety::new(safety_timing(scenario, golf_car_can::ThrottleCmd::ID)),
+                s.throttle.clone(),
+                s.vehicle.max_speed,
+                Safety::new(safety_timing(s.can, golf_car_can::ThrottleCmd::ID)),
             )),
         };
         EcuNode {

@@ -8,13 +8,28 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use embedded_can::nb::Can;
 use firmware_bridge::clock::Clock;
 use firmware_bridge::{BridgeError, CanPort, Received};
-use golf_car_can::{GolfCarMessage, Payload};
+use golf_car_can::{E2eStats, GolfCarMessage, Payload};
+use serde::Serialize;
 
-use super::{Ecu, EcuKind, EcuNode};
+use super::{Ecu, EcuKind, EcuNode, EcuSections};
 use crate::devices::map::EcuDevice;
 use crate::faults::{CounterMode, RxFault, TxFault};
-use crate::run::NodeStats;
-use crate::scenario::Scenario;
+
+/// A node's CAN statistics.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct NodeStats {
+    pub e2e: E2eStats,
+    pub undecodable: u64,
+    pub bus_errors: u64,
+    pub sent: u64,
+    /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
+    /// fault report, second sender, its own hardware fault (the simulated ECU's; zero
+    /// for a physical one).
+    pub safe_state_trips: [u64; 6],
+    /// Reports received from the physical ECU (absent when the ECU is simulated).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physical_reports: Option<u64>,
+}
 
 /// What plays an actuator ECU in the run.
 #[derive(Debug)]
@@ -84,11 +99,16 @@ pub struct Station<B> {
 
 impl<B: Can> Station<B> {
     /// The ECU `kind` on `port`, simulated or physical as `device` says.
-    pub fn new(kind: EcuKind, device: &EcuDevice, scenario: &Scenario, port: CanPort<B>) -> Self {
+    pub fn new(
+        kind: EcuKind,
+        device: &EcuDevice,
+        sections: &EcuSections<'_>,
+        port: CanPort<B>,
+    ) -> Self {
         Station {
             kind,
             twin: match device {
-                EcuDevice::Simulated {} => Twin::Simulated(Box::new(EcuNode::new(kind, scenario))),
+                EcuDevice::Simulated {} => Twin::Simulated(Box::new(EcuNode::new(kind, sections))),
                 EcuDevice::Physical { .. } => Twin::Physical(Reported::default()),
             },
             port,
@@ -325,19 +345,19 @@ pub struct StandaloneStatus {
 
 /// Run the simulated ECU `kind` alone on `port` (a stand-in for the hardware: it
 /// answers commands, watches the heartbeat and reports, as in a run) on `clock`,
-/// at the scenario's physics rate, until `stop`. `status` is called every
+/// at the scenario's physics rate (`sections.sim`), until `stop`. `status` is called every
 /// `status_every` seconds. Returns the final status.
 pub fn run_standalone<B: Can>(
     kind: EcuKind,
-    scenario: &Scenario,
+    sections: &EcuSections<'_>,
     port: CanPort<B>,
     clock: &mut dyn Clock,
     stop: &AtomicBool,
     status_every: f64,
     status: &mut dyn FnMut(&StandaloneStatus),
 ) -> Result<StandaloneStatus, BridgeError> {
-    let mut station = Station::new(kind, &EcuDevice::Simulated {}, scenario, port);
-    let dt = 1.0 / scenario.sim.physics_hz;
+    let mut station = Station::new(kind, &EcuDevice::Simulated {}, sections, port);
+    let dt = 1.0 / sections.sim.physics_hz;
     let every = ((status_every / dt).round() as u64).max(1);
     let snapshot = |station: &Station<B>, now: f64| {
         let (enabled, fault) = station.state();
@@ -371,6 +391,7 @@ pub fn run_standalone<B: Can>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::Scenario;
     use firmware_bridge::can::membus::{MemBus, MemEndpoint};
     use golf_car_can::e2e::{counter_of, protect};
     use golf_car_can::{
@@ -400,7 +421,7 @@ mod tests {
                 station: Station::new(
                     EcuKind::Steering,
                     &EcuDevice::Simulated {},
-                    &scenario,
+                    &scenario.ecu_sections(),
                     CanPort::new(bus.endpoint(), "mem"),
                 ),
                 controller: CanPort::new(bus.endpoint(), "mem"),

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, positive_up_to, within};
 
 use crate::devices::gps::FixKind;
+use crate::scenario::fields::{ScenarioError, parse, read};
 
 /// Most faults in one plan.
 pub const MAX_FAULTS: usize = 1_000;
@@ -734,4 +735,21 @@ pub struct PlanFile {
     pub faults: Vec<FaultSpec>,
     /// Replaces the scenario's `[expect]` when given.
     pub expect: Option<Expectations>,
+}
+
+/// Fault plan files load like scenarios (their errors are scenario errors).
+impl PlanFile {
+    /// Parse and validate TOML text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, ScenarioError> {
+        let plan: PlanFile = parse(text, file)?;
+        validate_plan(&plan.faults, &plan.expect.clone().unwrap_or_default())
+            .map_err(|e| e.located(text, file))?;
+        Ok(plan)
+    }
+
+    /// Read a fault plan file (`ugv-sim run --faults FILE`).
+    pub fn load(path: &std::path::Path) -> Result<PlanFile, ScenarioError> {
+        let text = read(path)?;
+        PlanFile::from_toml(&text, &path.display().to_string())
+    }
 }

@@ -20,7 +20,7 @@ pub fn scenario(gps: GpsConfig) -> Scenario {
 }
 
 pub fn device(gps: GpsConfig) -> Result<GpsDevice> {
-    Ok(GpsDevice::from_scenario(&scenario(gps))?)
+    Ok(scenario(gps).gps_device()?)
 }
 
 /// A vehicle state: rear axle at (x, y), heading `theta_deg` counter-clockwise from

@@ -5,7 +5,7 @@ use firmware_bridge::nmea::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::super::FieldError;
+use super::super::{FieldError, invalid};
 
 /// Slowest and fastest epoch rates, Hz (what RTK receivers offer).
 pub const RATE_RANGE_HZ: (f64, f64) = (1.0, 20.0);
@@ -177,7 +177,7 @@ macro_rules! fix_model_table {
                     if v.is_finite() && v >= 0.0 {
                         Ok(())
                     } else {
-                        Err(FieldError::new(field, format!("must be a finite number >= 0, is {v}")))
+                        Err(invalid(field, format!("must be a finite number >= 0, is {v}")))
                     }
                 };
                 non_negative(concat!($prefix, ".horizontal_sigma_m"), self.horizontal_sigma_m)?;
@@ -189,11 +189,11 @@ macro_rules! fix_model_table {
                     (concat!($prefix, ".vertical_sigma_m"), self.vertical_sigma_m),
                 ] {
                     if v > 1000.0 {
-                        return Err(FieldError::new(field, format!("{v} m exceeds 1000 m")));
+                        return Err(invalid(field, format!("{v} m exceeds 1000 m")));
                     }
                 }
                 if self.velocity_sigma_mps > 100.0 {
-                    return Err(FieldError::new(
+                    return Err(invalid(
                         concat!($prefix, ".velocity_sigma_mps"),
                         format!("{} m/s exceeds 100 m/s", self.velocity_sigma_mps),
                     ));
@@ -202,25 +202,25 @@ macro_rules! fix_model_table {
                     && self.time_constant_s > 0.0
                     && self.time_constant_s <= 86_400.0)
                 {
-                    return Err(FieldError::new(
+                    return Err(invalid(
                         concat!($prefix, ".time_constant_s"),
                         format!("must be within (0, 86400] s, is {}", self.time_constant_s),
                     ));
                 }
                 if !(0.0..=1.0).contains(&self.white_fraction) {
-                    return Err(FieldError::new(
+                    return Err(invalid(
                         concat!($prefix, ".white_fraction"),
                         format!("must be within [0, 1], is {}", self.white_fraction),
                     ));
                 }
                 if self.satellites > 99 {
-                    return Err(FieldError::new(
+                    return Err(invalid(
                         concat!($prefix, ".satellites"),
                         format!("must be within [0, 99], is {}", self.satellites),
                     ));
                 }
                 if !(self.hdop.is_finite() && self.hdop > 0.0 && self.hdop <= 99.99) {
-                    return Err(FieldError::new(
+                    return Err(invalid(
                         concat!($prefix, ".hdop"),
                         format!("must be within (0, 99.99], is {}", self.hdop),
                     ));
@@ -351,7 +351,7 @@ impl GpsConfig {
         ] {
             // The antenna sits on the car: within 20 m of its rear axle.
             if !(v.is_finite() && v.abs() <= 20.0) {
-                return Err(FieldError::new(
+                return Err(invalid(
                     field,
                     format!("must be within [-20, 20] m of the rear axle, is {v}"),
                 ));
@@ -359,27 +359,27 @@ impl GpsConfig {
         }
         let (lo, hi) = RATE_RANGE_HZ;
         if !(self.rate_hz.is_finite() && (lo..=hi).contains(&self.rate_hz)) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "rate_hz",
                 format!("must be within [{lo}, {hi}] Hz, is {}", self.rate_hz),
             ));
         }
         let (lo, hi) = BAUD_RANGE;
         if !(lo..=hi).contains(&self.baud) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "baud",
                 format!("must be within [{lo}, {hi}], is {}", self.baud),
             ));
         }
         let s = &self.sentences;
         if !(s.gga || s.rmc) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "sentences",
                 "neither GGA nor RMC is enabled: no sentence would carry the position",
             ));
         }
         if !(self.heading_sigma_deg.is_finite() && (0.0..=30.0).contains(&self.heading_sigma_deg)) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "heading_sigma_deg",
                 format!(
                     "must be within [0, 30] degrees, is {}",
@@ -390,13 +390,13 @@ impl GpsConfig {
         let mut last = f64::NEG_INFINITY;
         for (i, e) in self.events.iter().enumerate() {
             if !(e.at_s.is_finite() && e.at_s >= 0.0) {
-                return Err(FieldError::new(
+                return Err(invalid(
                     "events",
                     format!("events[{i}].at_s must be a finite time >= 0, is {}", e.at_s),
                 ));
             }
             if e.at_s < last {
-                return Err(FieldError::new(
+                return Err(invalid(
                     "events",
                     format!(
                         "events[{i}].at_s = {} is before events[{}].at_s = {last}: list events in time order",
@@ -411,19 +411,19 @@ impl GpsConfig {
         self.float.validate()?;
         self.single.validate()?;
         if !(self.correction_age_s.is_finite() && (0.0..=999.9).contains(&self.correction_age_s)) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "correction_age_s",
                 format!("must be within [0, 999.9] s, is {}", self.correction_age_s),
             ));
         }
         if self.station_id > 1023 {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "station_id",
                 format!("must be within [0, 1023], is {}", self.station_id),
             ));
         }
         if !(self.geoid_separation_m.is_finite() && self.geoid_separation_m.abs() <= 200.0) {
-            return Err(FieldError::new(
+            return Err(invalid(
                 "geoid_separation_m",
                 format!(
                     "must be within [-200, 200] m, is {}",
@@ -432,11 +432,11 @@ impl GpsConfig {
             ));
         }
         link_budget(&self.writer_config()).map_err(|e| match e {
-            NmeaError::BaudTooLow { .. } => FieldError::new(
+            NmeaError::BaudTooLow { .. } => invalid(
                 "baud",
                 format!("{} baud cannot carry {} Hz: {e}", self.baud, self.rate_hz),
             ),
-            other => FieldError::new("rate_hz", other.to_string()),
+            other => invalid("rate_hz", other.to_string()),
         })?;
         Ok(())
     }

@@ -1,0 +1,453 @@
+//! HIL: the simulator on the real wires in real time — NMEA on a pty paced at the
+//! baud rate, laser frames over iceoryx2, the simulated ECUs on SocketCAN — with the
+//! controller as a separate process: started here (`--controller BINARY`) or by the
+//! user.
+//!
+//! The binary opens the run's endpoints ([`Endpoints::open`]: the ECUs' CAN sockets,
+//! the recorder's tap, the GPS line, the laser, the gateways) and hands them to
+//! [`run_scenario`], which orchestrates the run: the controller's process
+//! ([`process`]), the real-time tick loop ([`run_hil`]), the judging and the results.
+
+mod process;
+mod wires;
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use firmware_bridge::BridgeError;
+use firmware_bridge::can::timed::{Horizon, TimedSocket};
+use firmware_bridge::clock::{Clock, WallClock};
+use firmware_bridge::gateway::GatewayError;
+use ugv_controller::config::ControllerConfig;
+use ugv_controller::trace::Trace;
+
+pub use process::{ControllerProcess, spawn_controller, wait_for_controller};
+pub use wires::{WireMap, Wires};
+
+use crate::devices::gps::GpsError;
+use crate::devices::map::{ControllerSite, GpsOutput};
+use crate::faults::ProcessFault;
+use crate::isolate::{IsolateError, NetNs};
+use crate::measure::fix_latency;
+use crate::mode::Mode;
+use crate::record::tap::SocketTap;
+use crate::record::{RecordError, RecordMode, Recorder, Recording, RunInfo};
+use crate::run::{Outcome, Sim, SimError, Snapshot};
+use crate::scenario::Scenario;
+use crate::verdict::{RunEnd, judge_and_write};
+
+/// Why the wires could not be set up or used.
+#[derive(Debug, thiserror::Error)]
+pub enum HilError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error("GPS port: {0}")]
+    Gps(#[from] GpsError),
+    #[error("laser service {service}: {message}")]
+    Laser { service: String, message: String },
+    #[error("starting the controller {binary}: {source}")]
+    Spawn {
+        binary: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("waiting for a controller on {iface}: {source}")]
+    Wait {
+        iface: String,
+        #[source]
+        source: BridgeError,
+    },
+    #[error("no controller heartbeat on {iface} within {seconds} s")]
+    NoController { iface: String, seconds: u64 },
+    #[error("devices.controller is on a board: the simulator cannot start it (drop --controller)")]
+    BoardControllerStarted,
+    #[error(
+        "devices.gps.peer: the GPS goes out on a serial device; name the far end of its cable (peer) for the controller started here"
+    )]
+    SerialGpsWithoutPeer,
+    #[error(
+        "the fault plan kills or stops the controller's process, which needs a controller started by ugv-sim (--controller)"
+    )]
+    ProcessFaultWithoutProcess,
+    #[error("isolating the run: {0}")]
+    Isolate(#[from] IsolateError),
+    #[error("gateway {sim} <-> {physical}: {source}")]
+    Gateway {
+        sim: String,
+        physical: String,
+        #[source]
+        source: GatewayError,
+    },
+    #[error("encoding the controller configuration: {0}")]
+    EncodeConfig(#[from] toml::ser::Error),
+    #[error("CAN interface {iface}: {source}")]
+    Can {
+        iface: String,
+        #[source]
+        source: BridgeError,
+    },
+    #[error("writing the results: {0}")]
+    Results(#[from] crate::verdict::ResultsError),
+    #[error("recording: {0}")]
+    Record(#[from] crate::record::RecordError),
+}
+
+/// The simulator's endpoints of one HIL run, opened by the binary and handed to
+/// [`run_scenario`]: the ECUs' CAN sockets (timed, sharing one horizon), the
+/// recorder's tap on the same bus, and the wires. With `--isolate`, all of them live
+/// in the run's private network namespace, which lasts as long as they do.
+pub struct Endpoints {
+    steering: TimedSocket,
+    throttle: TimedSocket,
+    tap: Option<SocketTap>,
+    wires: Wires,
+    /// Dropped last: the namespace the sockets were opened in.
+    _isolated: Option<NetNs>,
+}
+
+impl std::fmt::Debug for Endpoints {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Endpoints")
+            .field("wires", &self.wires)
+            .field("tap", &self.tap.is_some())
+            .finish()
+    }
+}
+
+impl Endpoints {
+    /// Check that `options` fit the scenario's device map, enter the private namespace
+    /// when asked, and open the endpoints of `scenario` on its CAN interface. `log`
+    /// gets a line for each thing the user should know.
+    pub fn open(
+        scenario: &Scenario,
+        options: &HilOptions,
+        log: &mut dyn FnMut(&str),
+    ) -> Result<Endpoints, HilError> {
+        let sc = scenario;
+        if options.controller.is_some() {
+            if matches!(sc.devices.controller, ControllerSite::Board { .. }) {
+                return Err(HilError::BoardControllerStarted);
+            }
+            if matches!(sc.devices.gps, GpsOutput::Serial { peer: None, .. }) {
+                return Err(HilError::SerialGpsWithoutPeer);
+            }
+        }
+        // --isolate: this thread, its sockets and the controller it starts live in a
+        // private network namespace until the endpoints are dropped.
+        let isolated = match &options.isolate {
+            Some(name) => Some(crate::isolate::enter(sc, name, log)?),
+            None => None,
+        };
+        let iface = sc.can.interface.clone();
+        let horizon = Horizon::new();
+        let open = |what: &str| {
+            firmware_bridge::CanPort::open_timed(&iface, horizon.clone()).map_err(|source| {
+                HilError::Can {
+                    iface: format!("{iface} ({what})"),
+                    source,
+                }
+            })
+        };
+        let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
+        let tap = match options.record {
+            true => Some(SocketTap::open(&iface).map_err(|source| RecordError::Tap {
+                iface: iface.clone(),
+                source,
+            })?),
+            false => None,
+        };
+        let gps_link = options
+            .gps_link
+            .clone()
+            .unwrap_or_else(|| std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id)));
+        let wires = Wires::open(sc, &gps_link, &options.run_id, horizon)?;
+        Ok(Endpoints {
+            steering,
+            throttle,
+            tap,
+            wires,
+            _isolated: isolated,
+        })
+    }
+
+    /// Where the wires are.
+    pub fn map(&self) -> &WireMap {
+        &self.wires.map
+    }
+}
+
+/// Step in real time on absolute deadlines, the sensors' output on the wires, until
+/// the run is over, `stop` is raised, or the controller exits. Returns the outcome
+/// and the monotonic time of tick 0 (see [`fix_latency`]).
+pub fn run_hil(
+    sim: &mut Sim<TimedSocket>,
+    wires: &mut Wires,
+    mut controller: Option<&mut ControllerProcess>,
+    stop: &AtomicBool,
+    status_every: f64,
+    status: &mut dyn FnMut(&Snapshot),
+    mut recording: Option<&mut Recording<SocketTap>>,
+) -> Result<(Outcome, u64), HilError> {
+    let mut clock = WallClock::new(sim.dt());
+    let started = clock.start_monotonic_ns();
+    let every = ((status_every / sim.dt()).round() as u64).max(1);
+    let mut process = ProcessFault::Running;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok((
+                Outcome::Stopped {
+                    time: sim.time(),
+                    reason: "stopped by signal".to_owned(),
+                },
+                started,
+            ));
+        }
+        let k = sim.next_tick();
+        let late = clock.wait_tick(k);
+        // A late tick takes only the frames that arrived by its deadline: catching up,
+        // each tick gets those of its own period (firmware_bridge::can::timed).
+        wires.can_horizon.set_for_tick(late);
+        let now = k as f64 * sim.dt();
+        let outcome = sim.step(clock.now(), late)?;
+        let out = sim.take_outputs();
+        if let Some(r) = recording.as_deref_mut() {
+            r.sensors(now, &out);
+            r.after_step(now, sim, None);
+        }
+        if let Some(epoch) = &out.gps {
+            wires.gps.enqueue(epoch);
+        }
+        wires.gps.pace(now)?;
+        if let Some(frame) = &out.laser {
+            wires.publish(frame)?;
+        }
+        if k.is_multiple_of(every) {
+            status(&sim.snapshot());
+        }
+        if let Some(o) = outcome {
+            return Ok((o, started));
+        }
+        let wanted = sim.process_fault();
+        if wanted != process {
+            let Some(c) = controller.as_deref_mut() else {
+                return Err(HilError::ProcessFaultWithoutProcess);
+            };
+            use nix::sys::signal::Signal;
+            c.signal(match wanted {
+                ProcessFault::Killed => Signal::SIGKILL,
+                ProcessFault::Stopped => Signal::SIGSTOP,
+                ProcessFault::Running => Signal::SIGCONT,
+            });
+            process = wanted;
+        }
+        // The run goes on until the car is safe, so the verdict can say how fast each
+        // ECU got there.
+        if k.is_multiple_of(20)
+            && let Some(c) = controller.as_deref_mut()
+            && let Ok(Some(exit)) = c.child.try_wait()
+        {
+            sim.controller_gone(format!("the controller exited ({exit})"));
+        }
+    }
+}
+
+/// How to run a scenario on the wires.
+#[derive(Clone, Debug)]
+pub struct HilOptions {
+    /// Start this controller binary with the wire locations.
+    pub controller: Option<PathBuf>,
+    /// Extra arguments for it.
+    pub controller_args: Vec<String>,
+    /// Wait for a controller started separately (implied when it is on a board).
+    pub wait_for_controller: bool,
+    /// The GPS link (a symlink to the pty); a temporary path named after the run
+    /// when absent.
+    pub gps_link: Option<PathBuf>,
+    /// Names the run's iceoryx2 services.
+    pub run_id: String,
+    /// Where verdict.json, the traces and the figure go.
+    pub results: PathBuf,
+    /// Simulated seconds between status calls.
+    pub status_every: f64,
+    /// Run in a private network namespace of this name (`--isolate`, see
+    /// [`crate::isolate`]): the CAN interface is created there, and no process
+    /// outside can open it.
+    pub isolate: Option<String>,
+    /// Record the run into `results` (see [`crate::record`]).
+    pub record: bool,
+    /// SCHED_FIFO priority of the tick loop while it runs, 0 for none (see
+    /// [`firmware_bridge::realtime`]).
+    pub rt_priority: u8,
+}
+
+/// Run `scenario` in HIL with the controller configured by `config` on the endpoints
+/// the binary opened: start or wait for the controller, step in real time until the
+/// outcome, collect the controller's trace, judge and write the results. `log` gets
+/// a line for each thing the user should know; `status` a snapshot every
+/// `status_every` seconds.
+pub fn run_scenario(
+    scenario: &Scenario,
+    config: &ControllerConfig,
+    endpoints: Endpoints,
+    options: &HilOptions,
+    stop: &AtomicBool,
+    log: &mut dyn FnMut(&str),
+    status: &mut dyn FnMut(&Snapshot),
+) -> Result<(crate::verdict::Verdict, Outcome), HilError> {
+    let sc = scenario;
+    let Endpoints {
+        steering,
+        throttle,
+        tap,
+        mut wires,
+        _isolated,
+    } = endpoints;
+    let iface = sc.can.interface.clone();
+    let mut sim = Sim::new(sc.clone(), steering, throttle).with_sensors()?;
+    let mut recording = match tap {
+        Some(tap) => {
+            let toml = toml::to_string_pretty(config).unwrap_or_default();
+            let info = RunInfo::of(RecordMode::Hil, sc, toml);
+            Some(Recording::new(
+                Recorder::create(&options.results, sc, info)?,
+                tap,
+            ))
+        }
+        None => None,
+    };
+    let m = &wires.map;
+    log(&format!(
+        "wires: GPS {} ({}, {} baud), laser iceoryx2 service {:?} ({}), CAN {} (golf_car.dbc); controller {}",
+        m.gps_link.display(),
+        m.gps_line,
+        m.gps_baud,
+        m.laser_service,
+        m.laser,
+        m.can,
+        m.controller,
+    ));
+    for (physical, nodes) in &m.gateways {
+        log(&format!(
+            "gateway {iface} <-> {physical}: physical {}",
+            nodes.join(", ")
+        ));
+    }
+    let write = |name: &str, text: String| {
+        let path = options.results.join(name);
+        std::fs::write(&path, text).map_err(|source| {
+            HilError::Results(crate::verdict::ResultsError::Write {
+                path: path.display().to_string(),
+                source,
+            })
+        })
+    };
+    write(
+        "wires.json",
+        serde_json::to_string_pretty(&wires.map).unwrap_or_default(),
+    )?;
+    // The controller's configuration: given to the binary started here, and left for
+    // a controller started by the user or flashed to a board.
+    let config_path = options.results.join("controller.toml");
+    write("controller.toml", toml::to_string_pretty(config)?)?;
+    let trace_path = options.results.join("controller-trace.jsonl");
+    let _ = std::fs::remove_file(&trace_path);
+    let mut controller = match &options.controller {
+        Some(binary) => {
+            log(&format!(
+                "starting {} (configuration {})",
+                binary.display(),
+                config_path.display()
+            ));
+            Some(spawn_controller(
+                binary,
+                &config_path,
+                &wires.map,
+                &trace_path,
+                &options.controller_args,
+            )?)
+        }
+        None => None,
+    };
+    let board = matches!(sc.devices.controller, ControllerSite::Board { .. });
+    if controller.is_none() && (options.wait_for_controller || board) {
+        log(&format!(
+            "waiting for a controller heartbeat on {iface} (configuration for it: {})",
+            config_path.display()
+        ));
+        if !wait_for_controller(&iface, Duration::from_secs(60), stop)? {
+            let outcome = Outcome::Stopped {
+                time: 0.0,
+                reason: "stopped by signal".to_owned(),
+            };
+            let verdict =
+                crate::verdict::Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), None);
+            return Ok((verdict, outcome));
+        }
+    }
+    log(&format!(
+        "physics {} Hz, time limit {} s",
+        sc.sim.physics_hz, sc.sim.time_limit_s
+    ));
+    // The controller and every helper thread were started: they stay ordinary.
+    let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
+    log(&rt_sched.promotion.describe("tick loop"));
+    let run = run_hil(
+        &mut sim,
+        &mut wires,
+        controller.as_mut(),
+        stop,
+        options.status_every,
+        status,
+        recording.as_mut(),
+    );
+    drop(rt_sched);
+    if let Some(r) = recording {
+        log(&crate::record::describe(&r.finish()));
+    }
+    // Whatever happened, the controller is asked to finish and its trace collected.
+    let trace = controller.as_mut().and_then(|c| {
+        let exit = c.finish(Duration::from_secs(5));
+        log(&format!("controller finished: {exit:?}"));
+        // Written while the controller ran: there even when it was killed.
+        std::fs::read_to_string(&c.trace)
+            .ok()
+            .and_then(|t| match Trace::from_jsonl(&t) {
+                Ok(trace) => Some(trace),
+                Err(e) => {
+                    log(&format!(
+                        "the controller's trace {}: {e}",
+                        c.trace.display()
+                    ));
+                    None
+                }
+            })
+    });
+    let (outcome, started_ns) = run?;
+    let (lines, last) = wires.gps_input();
+    if lines > 0 {
+        log(&format!(
+            "the controller wrote {lines} lines to the GPS port (last: {last:?})"
+        ));
+    }
+    let measured = |verdict: &mut crate::verdict::Verdict| {
+        verdict.fix_latency = trace.as_ref().and_then(|t| {
+            fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns)
+        });
+        verdict.wires = Some(wires.stats());
+    };
+    let end = RunEnd {
+        mode: Mode::Hil,
+        report: sim.report(outcome.clone()),
+        driven: &sim.trajectory,
+        trace: trace.as_ref(),
+    };
+    let verdict = judge_and_write(
+        sc,
+        end,
+        config.perception.detection_radius,
+        &options.results,
+        measured,
+    )?;
+    Ok((verdict, outcome))
+}

@@ -1,0 +1,228 @@
+//! The simulator's ends of the HIL wires: the GPS line (a pty, or a serial device),
+//! the laser (an iceoryx2 service, or a CoLa-A server and driver), and the gateways
+//! to physical buses, as the scenario's device map places them.
+
+use std::path::{Path, PathBuf};
+
+use firmware_bridge::can::timed::Horizon;
+use firmware_bridge::cola::{ColaServer, DecodeOptions, ServerConfig};
+use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayHandle};
+use firmware_bridge::laser::{LaserFrame, LaserPublisher, service_name};
+
+use super::HilError;
+use crate::devices::cola_driver::ColaDriverThread;
+use crate::devices::gps::GpsPort;
+use crate::devices::laser::LaserProfile;
+use crate::devices::map::{ControllerSite, GpsOutput, LaserSource};
+use crate::measure::{GpsLineStats, WireStats};
+use crate::scenario::Scenario;
+
+/// Where the wires are, for the user and for the controller.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct WireMap {
+    /// What the controller opens as its GPS: the pty's link, or the serial device.
+    pub gps_link: PathBuf,
+    pub gps_baud: u32,
+    /// "pty" or "serial".
+    pub gps_line: &'static str,
+    pub laser_service: String,
+    /// How the laser reaches the service: "iceoryx2", "cola <addr>", "physical <addr>".
+    pub laser: String,
+    /// The simulator's bus (the controller's, unless it is on a board).
+    pub can: String,
+    /// The gateways to physical buses: (physical interface, DBC nodes on it).
+    pub gateways: Vec<(String, Vec<&'static str>)>,
+    /// "local", or "board on <iface>".
+    pub controller: String,
+}
+
+/// Where the simulated scans go.
+enum LaserOut {
+    /// Straight onto the run's iceoryx2 service (boxed: an iceoryx2 publisher is
+    /// over a kilobyte).
+    Iceoryx2(Box<LaserPublisher>),
+    /// Served as a CoLa-A device over TCP (a driver puts them on the service).
+    Cola(ColaServer),
+    /// Nowhere: a physical laser is in the loop.
+    Off,
+}
+
+/// The simulator's ends of the wires, the gateways to physical buses, and the laser
+/// driver when the laser is a CoLa-A device.
+pub struct Wires {
+    pub map: WireMap,
+    pub(super) gps: GpsPort,
+    laser: LaserOut,
+    driver: Option<ColaDriverThread>,
+    gateways: Vec<GatewayHandle>,
+    /// Up to when the simulated ECUs' timed sockets hand out frames (set per tick).
+    pub(super) can_horizon: Horizon,
+}
+
+impl std::fmt::Debug for Wires {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Wires").field("map", &self.map).finish()
+    }
+}
+
+impl Wires {
+    /// Open the wires of the scenario's device map: the GPS pty behind `gps_link` (or
+    /// the serial device), the laser service of `run_id` (directly, or behind a CoLa-A
+    /// server and driver), and a gateway to each physical bus. `can_horizon` is the
+    /// horizon of the ECUs' timed sockets, which the run sets at each tick.
+    pub fn open(
+        sc: &Scenario,
+        gps_link: &Path,
+        run_id: &str,
+        can_horizon: Horizon,
+    ) -> Result<Wires, HilError> {
+        let devices = &sc.devices;
+        let (gps, gps_line) = match &devices.gps {
+            GpsOutput::Pty {} => (GpsPort::open(Some(gps_link), sc.gps.baud)?, "pty"),
+            GpsOutput::Serial { device, baud, .. } => (
+                GpsPort::serial(device, baud.unwrap_or(sc.gps.baud))?,
+                "serial",
+            ),
+        };
+        let service = service_name(run_id);
+        let laser_err = |message: String| HilError::Laser {
+            service: service.clone(),
+            message,
+        };
+        let (laser, driver, laser_text) = match &devices.laser {
+            LaserSource::Iceoryx2 {} => (
+                LaserOut::Iceoryx2(
+                    LaserPublisher::new(&service)
+                        .map(Box::new)
+                        .map_err(|e| laser_err(e.to_string()))?,
+                ),
+                None,
+                "iceoryx2".to_owned(),
+            ),
+            LaserSource::Cola { listen, driver } => {
+                let spec = sc.laser.spec();
+                let device = match sc.laser.profile {
+                    LaserProfile::Lms111 => "LMS111",
+                    LaserProfile::Lms291 => "LMS291",
+                };
+                let server = ColaServer::bind(
+                    *listen,
+                    ServerConfig {
+                        device_name: device.to_owned(),
+                        ..ServerConfig::lms111()
+                    },
+                )
+                .map_err(|e| laser_err(format!("serving CoLa-A on {listen}: {e}")))?;
+                let addr = server.local_addr();
+                let driver = if *driver {
+                    let decode = DecodeOptions {
+                        range_min: spec.range_min as f32,
+                        range_max: spec.range_max as f32,
+                        ..DecodeOptions::default()
+                    };
+                    Some(
+                        ColaDriverThread::spawn(addr, &service, decode)
+                            .map_err(|e| laser_err(format!("CoLa-A driver to {addr}: {e}")))?,
+                    )
+                } else {
+                    None
+                };
+                (LaserOut::Cola(server), driver, format!("cola {addr}"))
+            }
+            LaserSource::Physical { address } => (
+                LaserOut::Off,
+                Some(
+                    ColaDriverThread::spawn(*address, &service, DecodeOptions::default())
+                        .map_err(|e| laser_err(format!("CoLa-A driver to {address}: {e}")))?,
+                ),
+                format!("physical {address}"),
+            ),
+        };
+        let buses = devices.physical_buses();
+        let mut gateways = Vec::new();
+        for (physical, nodes) in &buses {
+            let config = GatewayConfig {
+                sim_iface: sc.can.interface.clone(),
+                physical_iface: physical.clone(),
+                physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
+                ..GatewayConfig::default()
+            };
+            gateways.push(
+                Gateway::spawn(config).map_err(|source| HilError::Gateway {
+                    sim: sc.can.interface.clone(),
+                    physical: physical.clone(),
+                    source,
+                })?,
+            );
+        }
+        Ok(Wires {
+            map: WireMap {
+                gps_link: match &devices.gps {
+                    GpsOutput::Serial {
+                        peer: Some(peer), ..
+                    } => peer.clone(),
+                    _ => gps.path().to_path_buf(),
+                },
+                gps_baud: match &devices.gps {
+                    GpsOutput::Serial { baud: Some(b), .. } => *b,
+                    _ => sc.gps.baud,
+                },
+                gps_line,
+                laser_service: service,
+                laser: laser_text,
+                can: sc.can.interface.clone(),
+                gateways: buses,
+                controller: match &devices.controller {
+                    ControllerSite::Local {} => "local".to_owned(),
+                    ControllerSite::Board { can } => format!("board on {can}"),
+                },
+            },
+            gps,
+            laser,
+            driver,
+            gateways,
+            can_horizon,
+        })
+    }
+
+    /// Lines the controller wrote to the GPS port (GGA for NTRIP, configuration).
+    pub fn gps_input(&self) -> (u64, Option<String>) {
+        let log = self.gps.input();
+        (log.count(), log.last().map(str::to_owned))
+    }
+
+    /// Put a scan on its way.
+    pub(super) fn publish(&mut self, frame: &LaserFrame) -> Result<(), HilError> {
+        match &mut self.laser {
+            LaserOut::Iceoryx2(p) => p.publish(frame).map(|_| ()).map_err(|e| HilError::Laser {
+                service: self.map.laser_service.clone(),
+                message: e.to_string(),
+            }),
+            // Never blocks: a client too slow for the scans loses them (counted).
+            LaserOut::Cola(server) => {
+                server
+                    .publish(frame)
+                    .map(|_| ())
+                    .map_err(|e| HilError::Laser {
+                        service: self.map.laser_service.clone(),
+                        message: format!("CoLa-A server: {e}"),
+                    })
+            }
+            LaserOut::Off => Ok(()),
+        }
+    }
+
+    /// What the gateways and the laser driver did, for the verdict.
+    pub fn stats(&self) -> WireStats {
+        WireStats {
+            gps_line: GpsLineStats {
+                written_bytes: self.gps.written(),
+                dropped_sentences: self.gps.dropped_sentences(),
+                dropped_bytes: self.gps.dropped_bytes(),
+            },
+            gateways: self.gateways.iter().map(GatewayHandle::stats).collect(),
+            laser_driver: self.driver.as_ref().map(ColaDriverThread::stats),
+        }
+    }
+}
+

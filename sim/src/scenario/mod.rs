@@ -1,0 +1,448 @@
+//! Scenarios: the world, the vehicle, its devices and the verdict's criteria, as TOML.
+//!
+//! Every struct has a `Default` that is the seed paper's simulation (start (0,0)
+//! heading 45 degrees, goal (30,15), one post of radius 3 m at (19,8)), so a scenario
+//! file only states what differs. A malformed or inconsistent file is refused with an
+//! error naming the file, the line and the field.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, size, within};
+
+use crate::devices::gps::{GpsConfig, GpsDevice, GpsError};
+use crate::devices::laser::{LaserConfig, LaserDevice, LaserDeviceError};
+use crate::devices::map::DeviceMap;
+use crate::ecu::EcuSections;
+use crate::faults::plan::PlanFile;
+use crate::faults::{Expectations, FaultSpec};
+use fields::{MAX_OBSTACLES, check_motion, check_points};
+
+pub mod fields;
+pub mod schema;
+
+pub use fields::ScenarioError;
+pub use schema::*;
+
+/// The paper's scenario, shipped embedded as the default.
+pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
+
+/// A whole scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    pub description: String,
+    pub datum: Datum,
+    pub start: Pose,
+    pub goal: Goal,
+    /// Points to pass in order before the goal (`[[waypoints]]`): with them the
+    /// mission is a route, start, waypoints, goal; without, the one leg start-goal.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub waypoints: Vec<ugv_controller::route::Waypoint>,
+    pub obstacles: Vec<Obstacle>,
+    pub vehicle: VehicleConfig,
+    pub steering: SteeringConfig,
+    pub throttle: ThrottleConfig,
+    pub can: CanConfig,
+    pub gps: GpsConfig,
+    pub laser: LaserConfig,
+    pub sim: SimConfig,
+    pub success: SuccessCriteria,
+    /// Which devices are simulated and which physical (all simulated by default).
+    pub devices: DeviceMap,
+    /// The controller's tuning for this scenario, where it differs from its defaults.
+    pub controller: ControllerTuning,
+    /// Faults injected during the run (`[[faults]]`), in the order written.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<FaultSpec>,
+    /// What must follow the faults.
+    pub expect: Expectations,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Scenario {
+            name: "paper".to_owned(),
+            description: "The seed paper's simulation: one post between start and goal".to_owned(),
+            datum: Datum::default(),
+            start: Pose {
+                x: 0.0,
+                y: 0.0,
+                heading_deg: 45.0,
+            },
+            goal: Goal::default(),
+            waypoints: Vec::new(),
+            obstacles: vec![Obstacle::Circle {
+                x: 19.0,
+                y: 8.0,
+                radius: 3.0,
+                motion: None,
+            }],
+            vehicle: VehicleConfig::default(),
+            steering: SteeringConfig::default(),
+            throttle: ThrottleConfig::default(),
+            can: CanConfig::default(),
+            gps: Default::default(),
+            laser: Default::default(),
+            sim: SimConfig::default(),
+            success: SuccessCriteria::default(),
+            devices: Default::default(),
+            controller: ControllerTuning::default(),
+            faults: Vec::new(),
+            expect: Default::default(),
+        }
+    }
+}
+
+impl Scenario {
+    /// The GPS receiver of the scenario: its `[gps]`, `datum`, `sim` and wheelbase.
+    pub fn gps_device(&self) -> Result<GpsDevice, GpsError> {
+        GpsDevice::new(&self.gps, &self.datum, &self.sim, self.vehicle.wheelbase)
+    }
+
+    /// The laser scanner of the scenario: its `[laser]`, obstacles, `sim.seed` and
+    /// `sim.epoch`.
+    pub fn laser_device(&self) -> Result<LaserDevice, LaserDeviceError> {
+        LaserDevice::new(
+            &self.laser,
+            &self.obstacles,
+            self.sim.seed,
+            self.sim.epoch.unix_ns(),
+        )
+    }
+
+    /// The sections the simulated ECUs take.
+    pub fn ecu_sections(&self) -> EcuSections<'_> {
+        EcuSections {
+            steering: &self.steering,
+            throttle: &self.throttle,
+            vehicle: &self.vehicle,
+            can: &self.can,
+            sim: &self.sim,
+        }
+    }
+
+    /// Parse and validate TOML text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &str) -> Result<Scenario, ScenarioError> {
+        let scenario: Scenario = fields::parse(text, file)?;
+        scenario.validate().map_err(|e| e.located(text, file))?;
+        Ok(scenario)
+    }
+
+    /// The scenario with what the command line changes of it, validated again as a
+    /// whole (a new bus can collide with a physical device's, a fault plan with the
+    /// time limit): the error names the field the change broke.
+    pub fn with_overrides(mut self, overrides: Overrides) -> Result<Scenario, FieldError> {
+        let Overrides {
+            can,
+            devices,
+            time_limit_s,
+            faults,
+        } = overrides;
+        if let Some(iface) = can {
+            self.can.interface = iface;
+        }
+        if let Some(devices) = devices {
+            self.devices = devices;
+        }
+        if let Some(limit) = time_limit_s {
+            self.sim.time_limit_s = limit;
+        }
+        if let Some(plan) = faults {
+            self.faults.extend(plan.faults);
+            if let Some(expect) = plan.expect {
+                self.expect = expect;
+            }
+        }
+        self.validate()?;
+        Ok(self)
+    }
+
+    /// Read a scenario file.
+    pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+        let text = fields::read(path)?;
+        Scenario::from_toml(&text, &path.display().to_string())
+    }
+
+    /// The paper's scenario (embedded).
+    pub fn paper() -> Result<Scenario, ScenarioError> {
+        Scenario::from_toml(PAPER_SCENARIO, "scenarios/paper.toml (embedded)")
+    }
+
+    /// Load `path`, or the paper's scenario when none is given.
+    pub fn load_or_paper(path: Option<&PathBuf>) -> Result<Scenario, ScenarioError> {
+        match path {
+            Some(p) => Scenario::load(p),
+            None => Scenario::paper(),
+        }
+    }
+
+    /// The first field that makes no sense, and why: every number finite, of the
+    /// right sign and within plausible bounds (positions within
+    /// [`ugv_fields::PLAUSIBLE_COORDINATE`], so the physics' `f32` never sees an
+    /// infinity), the DBC's signal ranges where a value ends up on the bus, and the
+    /// start and goal usable.
+    pub(crate) fn validate(&self) -> Result<(), FieldError> {
+        let at = |keys: &[&'static str]| FieldPath::of(keys);
+        crate::faults::plan::validate_plan(&self.faults, &self.expect)?;
+        let d = &self.datum;
+        within(
+            &at(&["datum", "latitude"]),
+            d.latitude,
+            -89.0,
+            89.0,
+            "degrees",
+        )?;
+        within(
+            &at(&["datum", "longitude"]),
+            d.longitude,
+            -180.0,
+            180.0,
+            "degrees",
+        )?;
+        within(
+            &at(&["datum", "altitude"]),
+            d.altitude,
+            -1_000.0,
+            10_000.0,
+            "m",
+        )?;
+        coordinate(&at(&["start", "x"]), self.start.x)?;
+        coordinate(&at(&["start", "y"]), self.start.y)?;
+        angle_deg(&at(&["start", "heading_deg"]), self.start.heading_deg)?;
+        coordinate(&at(&["goal", "x"]), self.goal.x)?;
+        coordinate(&at(&["goal", "y"]), self.goal.y)?;
+        if let Some(h) = self.goal.heading_deg {
+            angle_deg(&at(&["goal", "heading_deg"]), h)?;
+        }
+        positive_up_to(&at(&["goal", "tolerance"]), self.goal.tolerance, 50.0, "m")?;
+        if let Some(v) = self.goal.speed_limit {
+            positive_up_to(
+                &at(&["goal", "speed_limit"]),
+                v,
+                self.vehicle.max_speed,
+                "m/s (vehicle.max_speed)",
+            )?;
+        }
+        if let Some(r) = self.controller.detection_radius {
+            positive_up_to(
+                &at(&["controller", "detection_radius"]),
+                r,
+                self.laser.spec().range_max,
+                "m (the laser's range_max)",
+            )?;
+        }
+        // The controller's own rule (its mission.waypoints): every leg has a length.
+        ugv_controller::route::check_waypoints(
+            &at(&["waypoints"]),
+            &self.waypoints,
+            (self.start.x, self.start.y),
+            (self.goal.x, self.goal.y),
+            &at(&["goal"]),
+            self.vehicle.max_speed,
+        )?;
+
+        let v = &self.vehicle;
+        let vp = |k: &'static str| at(&["vehicle", k]);
+        for (k, x) in [
+            ("wheelbase", v.wheelbase),
+            ("length", v.length),
+            ("width", v.width),
+            ("radius", v.radius),
+        ] {
+            positive_up_to(&vp(k), x, 20.0, "m")?;
+        }
+        within(&vp("rear_overhang"), v.rear_overhang, 0.0, 20.0, "m")?;
+        if v.rear_overhang + v.wheelbase > v.length {
+            return Err(FieldError::new(
+                vp("wheelbase"),
+                format!(
+                    "rear_overhang {} + wheelbase {} exceed the length {}",
+                    v.rear_overhang, v.wheelbase, v.length
+                ),
+            ));
+        }
+        if !(v.max_steer_deg > 0.0 && v.max_steer_deg < 60.0) {
+            return Err(FieldError::new(
+                vp("max_steer_deg"),
+                format!("must be in (0, 60), is {}", v.max_steer_deg),
+            ));
+        }
+        // The DBC's ranges bound what can be commanded at all.
+        if v.max_steer_deg > 45.0 {
+            return Err(FieldError::new(
+                vp("max_steer_deg"),
+                "exceeds the DBC's TargetAngle range of 45 degrees",
+            ));
+        }
+        positive(&vp("max_speed"), v.max_speed)?;
+        if v.max_speed > 10.0 {
+            return Err(FieldError::new(
+                vp("max_speed"),
+                "exceeds the DBC's TargetSpeed range of 10 m/s",
+            ));
+        }
+
+        let s = &self.steering;
+        let sp = |k: &'static str| at(&["steering", k]);
+        within(&sp("dead_time_s"), s.dead_time_s, 0.0, 5.0, "s")?;
+        positive_up_to(&sp("time_constant_s"), s.time_constant_s, 10.0, "s")?;
+        positive_up_to(&sp("max_rate_deg_s"), s.max_rate_deg_s, 1_000.0, "deg/s")?;
+        // The DBC's MotorCurrent range.
+        within(&sp("idle_current_a"), s.idle_current_a, 0.0, 25.5, "A")?;
+        within(
+            &sp("current_per_rate_a"),
+            s.current_per_rate_a,
+            0.0,
+            10.0,
+            "A per deg/s",
+        )?;
+        within(&sp("bias_deg"), s.bias_deg, -10.0, 10.0, "degrees")?;
+        let t = &self.throttle;
+        let tp = |k: &'static str| at(&["throttle", k]);
+        within(&tp("dead_time_s"), t.dead_time_s, 0.0, 5.0, "s")?;
+        positive_up_to(&tp("time_constant_s"), t.time_constant_s, 10.0, "s")?;
+        positive_up_to(&tp("max_accel"), t.max_accel, 20.0, "m/s^2")?;
+        positive_up_to(&tp("max_decel"), t.max_decel, 20.0, "m/s^2")?;
+        positive_up_to(&tp("brake_decel"), t.brake_decel, 20.0, "m/s^2")?;
+        within(
+            &tp("throttle_per_speed"),
+            t.throttle_per_speed,
+            0.0,
+            100.0,
+            "% per m/s",
+        )?;
+        if self.can.interface.is_empty() || self.can.interface.len() > 15 {
+            return Err(FieldError::new(
+                at(&["can", "interface"]),
+                "must be 1 to 15 characters",
+            ));
+        }
+        if self.can.fault_clear_ms > 60_000 {
+            return Err(FieldError::new(
+                at(&["can", "fault_clear_ms"]),
+                format!("must be at most 60000 ms, is {}", self.can.fault_clear_ms),
+            ));
+        }
+
+        self.gps.validate().map_err(|e| e.under(&at(&["gps"])))?;
+        self.laser.validate().map_err(|e| e.under(&at(&["laser"])))?;
+        self.devices
+            .validate(&self.can.interface)
+            .map_err(|e| e.under(&at(&["devices"])))?;
+        let sim = &self.sim;
+        within(
+            &at(&["sim", "physics_hz"]),
+            sim.physics_hz,
+            10.0,
+            2000.0,
+            "Hz",
+        )?;
+        positive_up_to(
+            &at(&["sim", "time_limit_s"]),
+            sim.time_limit_s,
+            86_400.0,
+            "s",
+        )?;
+        within(
+            &at(&["success", "min_clearance"]),
+            self.success.min_clearance,
+            0.0,
+            100.0,
+            "m",
+        )?;
+
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(FieldError::new(
+                at(&["obstacles"]),
+                format!(
+                    "has {} obstacles, at most {MAX_OBSTACLES} are allowed",
+                    self.obstacles.len()
+                ),
+            ));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            let p = at(&["obstacles"]).index(i);
+            match o {
+                Obstacle::Circle {
+                    x,
+                    y,
+                    radius,
+                    motion,
+                } => {
+                    coordinate(&p.key("x"), *x)?;
+                    coordinate(&p.key("y"), *y)?;
+                    size(&p.key("radius"), *radius)?;
+                    check_motion(&p.key("motion"), motion)?;
+                }
+                Obstacle::Box {
+                    x,
+                    y,
+                    length,
+                    width,
+                    heading_deg,
+                    motion,
+                } => {
+                    coordinate(&p.key("x"), *x)?;
+                    coordinate(&p.key("y"), *y)?;
+                    size(&p.key("length"), *length)?;
+                    size(&p.key("width"), *width)?;
+                    angle_deg(&p.key("heading_deg"), *heading_deg)?;
+                    check_motion(&p.key("motion"), motion)?;
+                }
+                Obstacle::Wall { points, thickness } => {
+                    check_points(&p.key("points"), points, 2)?;
+                    size(&p.key("thickness"), *thickness)?;
+                    for (j, w) in points.windows(2).enumerate() {
+                        if w[0] == w[1] {
+                            return Err(FieldError::new(
+                                p.key("points").index(j + 1),
+                                "repeats the previous point",
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+        // Consistency: the start and the goal must be free (the footprint at the start,
+        // the planner's circle at the goal), or nothing would ever pass.
+        let world = crate::world::World::new(&self.obstacles);
+        let start = crate::vehicle::VehicleState::at(&self.start);
+        if let Some(i) = world.footprint_hits(&self.vehicle, &start).first() {
+            return Err(FieldError::new(
+                at(&["start"]),
+                format!("the vehicle's footprint at the start overlaps obstacles[{i}]"),
+            ));
+        }
+        if self.success.reach_goal
+            && let Some(i) = world
+                .circle_hits(self.goal.x, self.goal.y, self.goal.tolerance.min(0.5))
+                .first()
+        {
+            return Err(FieldError::new(
+                at(&["goal"]),
+                format!(
+                    "the goal lies inside obstacles[{i}] at t = 0 but success.reach_goal is true"
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+
+
+/// What the command line may change of a scenario (`ugv-sim run`, `suite --hil`).
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    /// `--can`: the simulator's bus.
+    pub can: Option<String>,
+    /// `--devices`: a bench file's device map.
+    pub devices: Option<DeviceMap>,
+    /// `--time-limit`, seconds.
+    pub time_limit_s: Option<f64>,
+    /// `--faults`: a fault plan whose faults follow the scenario's own (and whose
+    /// `[expect]`, when it has one, replaces the scenario's).
+    pub faults: Option<PlanFile>,
+}
