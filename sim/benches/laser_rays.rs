@@ -8,7 +8,6 @@ use std::time::{Duration, Instant};
 
 use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
 use ugv_sim::Scenario;
-use ugv_sim::devices::laser::LaserDevice;
 use ugv_sim::scenario::Obstacle;
 use ugv_sim::world::World;
 

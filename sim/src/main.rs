@@ -31,9 +31,9 @@ use ugv_sim::ecu::station::run_standalone;
 use ugv_sim::hil::{self, Endpoints, HilOptions};
 use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::run::Snapshot;
+use ugv_sim::scenario::Overrides;
 use ugv_sim::sil::Hook;
 use ugv_sim::verdict::{RunEnd, judge_and_write};
-use ugv_sim::scenario::Overrides;
 use ugv_sim::{Mode, Outcome, Scenario};
 
 #[derive(Parser, Debug)]
@@ -346,22 +346,30 @@ fn run_ecu(
     let rt_sched = realtime::promote(rt_priority);
     eprintln!("ugv-sim: {}", rt_sched.promotion.describe("ECU loop"));
     let mut clock = WallClock::new(1.0 / sc.sim.physics_hz);
-    let fin = run_standalone(kind, &sc.ecu_sections(), port, &mut clock, &stop, status_every, &mut |s| {
-        let unit = match kind {
-            EcuKind::Steering => "°",
-            EcuKind::Throttle => " m/s",
-        };
-        eprintln!(
-            "t={:8.2}s {}{} {:7.2}{unit} sent {} e2e ok {} rejected {}",
-            s.time,
-            if s.enabled { "enabled" } else { "disabled" },
-            s.fault.map(|c| format!(" SAFE({c:?})")).unwrap_or_default(),
-            s.value,
-            s.stats.sent,
-            s.stats.e2e.accepted,
-            s.stats.e2e.rejected(),
-        );
-    })?;
+    let fin = run_standalone(
+        kind,
+        &sc.ecu_sections(),
+        port,
+        &mut clock,
+        &stop,
+        status_every,
+        &mut |s| {
+            let unit = match kind {
+                EcuKind::Steering => "°",
+                EcuKind::Throttle => " m/s",
+            };
+            eprintln!(
+                "t={:8.2}s {}{} {:7.2}{unit} sent {} e2e ok {} rejected {}",
+                s.time,
+                if s.enabled { "enabled" } else { "disabled" },
+                s.fault.map(|c| format!(" SAFE({c:?})")).unwrap_or_default(),
+                s.value,
+                s.stats.sent,
+                s.stats.e2e.accepted,
+                s.stats.e2e.rejected(),
+            );
+        },
+    )?;
     println!("{}", serde_json::to_string_pretty(&fin)?);
     Ok(ExitCode::SUCCESS)
 }
@@ -521,21 +529,14 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         eprintln!("ugv-sim: {line}");
     };
     let endpoints = Endpoints::open(&sc, &options, &mut log)?;
-    let (verdict, outcome) = hil::run_scenario(
-        &sc,
-        &cfg,
-        endpoints,
-        &options,
-        &stop,
-        &mut log,
-        &mut |s| {
+    let (verdict, outcome) =
+        hil::run_scenario(&sc, &cfg, endpoints, &options, &stop, &mut log, &mut |s| {
             if tty {
                 eprint!("\r\x1b[2K{}", status_line(s));
             } else {
                 eprintln!("{}", status_line(s));
             }
-        },
-    )?;
+        })?;
     if tty {
         eprintln!();
     }
@@ -639,9 +640,17 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
         let endpoints = Endpoints::open(&sc, &options, &mut |_| {}).map_err(|e| e.to_string())?;
-        hil::run_scenario(&sc, &tune(&sc), endpoints, &options, &stop, &mut |_| {}, &mut |_| {})
-            .map(|(verdict, _)| verdict)
-            .map_err(|e| e.to_string())
+        hil::run_scenario(
+            &sc,
+            &tune(&sc),
+            endpoints,
+            &options,
+            &stop,
+            &mut |_| {},
+            &mut |_| {},
+        )
+        .map(|(verdict, _)| verdict)
+        .map_err(|e| e.to_string())
     };
     let (runner, jobs): (&suite::Runner<'_>, usize) = if hil {
         anyhow::ensure!(

@@ -4,7 +4,7 @@
 
 use embedded_can::nb::Can;
 use firmware_bridge::{BridgeError, CanPort};
-use golf_car_can::{CanMessage, E2eStats};
+use golf_car_can::CanMessage;
 use serde::Serialize;
 
 use crate::busload::{BusLoad, BusLoadReport};

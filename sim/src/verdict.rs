@@ -209,6 +209,7 @@ fn write(path: &Path, text: &str) -> Result<(), ResultsError> {
 
 /// How a run ended, for [`judge_and_write`]: its mode, the simulator's report, the
 /// driven path, and the controller's trace when there is one.
+#[derive(Debug)]
 pub struct RunEnd<'a> {
     pub mode: Mode,
     pub report: RunReport,

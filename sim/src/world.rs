@@ -288,6 +288,7 @@ impl World {
 mod tests {
     use super::*;
     use crate::scenario::Pose as ScenarioPose;
+    use crate::scenario::Scenario;
 
     #[test]
     fn paper_scenario_footprint_collides_only_inside_the_post() {

@@ -8,7 +8,7 @@ use chrono::{NaiveDate, TimeDelta};
 use firmware_bridge::nmea::{FixQuality, SentenceKind};
 use gps_common::{TICK_S, device, noiseless, read_one, reader, run, scenario, vehicle};
 use ugv_sim::Scenario;
-use ugv_sim::devices::gps::{FixEvent, FixKind, GpsConfig, GpsDevice, HeadingSentence};
+use ugv_sim::devices::gps::{FixEvent, FixKind, GpsConfig, HeadingSentence};
 use ugv_sim::vehicle::VehicleState;
 
 /// The antenna's world position by hand: the offset rotated by theta.

@@ -4,7 +4,7 @@
 
 use firmware_bridge::laser::LaserFrame;
 use ugv_sim::Scenario;
-use ugv_sim::devices::laser::{LaserConfig, LaserDevice, LaserProfile};
+use ugv_sim::devices::laser::{LaserConfig, LaserProfile};
 use ugv_sim::scenario::{Motion, Obstacle};
 use ugv_sim::world::World;
 

@@ -11,7 +11,7 @@ use anyhow::{Context as _, Result, ensure};
 use firmware_bridge::nmea::{FixQuality, NmeaLink, ReadEvent, ReaderConfig, checksum, open_serial};
 use ugv_e2e_tests::NullModem;
 use ugv_sim::Scenario;
-use ugv_sim::devices::gps::{GpsDevice, GpsPort};
+use ugv_sim::devices::gps::GpsPort;
 use ugv_sim::vehicle::VehicleState;
 
 #[test]

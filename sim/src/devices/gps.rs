@@ -63,10 +63,10 @@ pub use noise::{EpochError, ErrorModel, GPS_STREAM};
 pub use pacer::Pacer;
 pub use port::{GpsPort, INPUT_LOG_LINES, InputLog};
 
-use crate::scenario::schema::{Datum, SimConfig};
 use super::FieldError;
-use ugv_fields::FieldPath;
+use crate::scenario::schema::{Datum, SimConfig};
 use crate::vehicle::VehicleState;
+use ugv_fields::FieldPath;
 
 /// Slack for deciding that an epoch is due, seconds.
 const EPS_S: f64 = 1e-9;

@@ -239,10 +239,10 @@ impl DeviceMap {
         let file = path.display().to_string();
         let text = read(path)?;
         let bench: BenchFile = parse(&text, &file)?;
-        bench.devices.validate(sim_can).map_err(|e| {
-            e.under(&FieldPath::of(&["devices"]))
-                .located(&text, &file)
-        })?;
+        bench
+            .devices
+            .validate(sim_can)
+            .map_err(|e| e.under(&FieldPath::of(&["devices"])).located(&text, &file))?;
         Ok(bench.devices)
     }
 }
@@ -367,7 +367,10 @@ controller = { mode = "board", can = "can0" }
             },
             ..DeviceMap::default()
         };
-        assert_eq!(slow.validate("vcan0").unwrap_err().path.to_string(), "gps.baud");
+        assert_eq!(
+            slow.validate("vcan0").unwrap_err().path.to_string(),
+            "gps.baud"
+        );
     }
 
     #[test]

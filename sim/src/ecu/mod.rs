@@ -12,7 +12,9 @@ use golf_car_can::{
     SteeringReport, ThrottleReport,
 };
 
-use crate::scenario::schema::{CanConfig, SimConfig, SteeringConfig, ThrottleConfig, VehicleConfig};
+use crate::scenario::schema::{
+    CanConfig, SimConfig, SteeringConfig, ThrottleConfig, VehicleConfig,
+};
 use safety::{Safety, SafetyTiming};
 pub use steering::SteeringEcu;
 pub use throttle::ThrottleEcu;

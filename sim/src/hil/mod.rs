@@ -15,10 +15,10 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use firmware_bridge::BridgeError;
 use firmware_bridge::can::timed::{Horizon, TimedSocket};
 use firmware_bridge::clock::{Clock, WallClock};
 use firmware_bridge::gateway::GatewayError;
+use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
@@ -28,7 +28,7 @@ pub use wires::{WireMap, Wires};
 use crate::devices::gps::GpsError;
 use crate::devices::map::{ControllerSite, GpsOutput};
 use crate::faults::ProcessFault;
-use crate::isolate::{IsolateError, NetNs};
+use crate::isolate::IsolateError;
 use crate::measure::fix_latency;
 use crate::mode::Mode;
 use crate::record::tap::SocketTap;
@@ -36,6 +36,7 @@ use crate::record::{RecordError, RecordMode, Recorder, Recording, RunInfo};
 use crate::run::{Outcome, Sim, SimError, Snapshot};
 use crate::scenario::Scenario;
 use crate::verdict::{RunEnd, judge_and_write};
+use vcan_setup::netns::NetNs;
 
 /// Why the wires could not be set up or used.
 #[derive(Debug, thiserror::Error)]
@@ -98,8 +99,8 @@ pub enum HilError {
 /// recorder's tap on the same bus, and the wires. With `--isolate`, all of them live
 /// in the run's private network namespace, which lasts as long as they do.
 pub struct Endpoints {
-    steering: TimedSocket,
-    throttle: TimedSocket,
+    steering: CanPort<TimedSocket>,
+    throttle: CanPort<TimedSocket>,
     tap: Option<SocketTap>,
     wires: Wires,
     /// Dropped last: the namespace the sockets were opened in.
@@ -142,11 +143,9 @@ impl Endpoints {
         let iface = sc.can.interface.clone();
         let horizon = Horizon::new();
         let open = |what: &str| {
-            firmware_bridge::CanPort::open_timed(&iface, horizon.clone()).map_err(|source| {
-                HilError::Can {
-                    iface: format!("{iface} ({what})"),
-                    source,
-                }
+            CanPort::open_timed(&iface, horizon.clone()).map_err(|source| HilError::Can {
+                iface: format!("{iface} ({what})"),
+                source,
             })
         };
         let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
@@ -157,10 +156,9 @@ impl Endpoints {
             })?),
             false => None,
         };
-        let gps_link = options
-            .gps_link
-            .clone()
-            .unwrap_or_else(|| std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id)));
+        let gps_link = options.gps_link.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id))
+        });
         let wires = Wires::open(sc, &gps_link, &options.run_id, horizon)?;
         Ok(Endpoints {
             steering,
@@ -431,9 +429,9 @@ pub fn run_scenario(
         ));
     }
     let measured = |verdict: &mut crate::verdict::Verdict| {
-        verdict.fix_latency = trace.as_ref().and_then(|t| {
-            fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns)
-        });
+        verdict.fix_latency = trace
+            .as_ref()
+            .and_then(|t| fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns));
         verdict.wires = Some(wires.stats());
     };
     let end = RunEnd {

@@ -147,13 +147,11 @@ impl Wires {
                 physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
                 ..GatewayConfig::default()
             };
-            gateways.push(
-                Gateway::spawn(config).map_err(|source| HilError::Gateway {
-                    sim: sc.can.interface.clone(),
-                    physical: physical.clone(),
-                    source,
-                })?,
-            );
+            gateways.push(Gateway::spawn(config).map_err(|source| HilError::Gateway {
+                sim: sc.can.interface.clone(),
+                physical: physical.clone(),
+                source,
+            })?);
         }
         Ok(Wires {
             map: WireMap {
@@ -225,4 +223,3 @@ impl Wires {
         }
     }
 }
-

@@ -2,7 +2,7 @@
 //! that name the file, the line and the field, and the field checks of a scenario's
 //! geometry that the shared toolkit (`ugv_fields`) does not know.
 
-use ugv_fields::{FieldError, FieldPath, LocatedError, coordinate, positive_up_to};
+use ugv_fields::{FieldError, FieldPath, LocatedError, coordinate, positive_up_to, within};
 
 use super::schema::Motion;
 
@@ -41,7 +41,11 @@ pub fn read(path: &std::path::Path) -> Result<String, ScenarioError> {
     })
 }
 
-pub(super) fn check_points(path: &FieldPath, points: &[[f64; 2]], min: usize) -> Result<(), FieldError> {
+pub(super) fn check_points(
+    path: &FieldPath,
+    points: &[[f64; 2]],
+    min: usize,
+) -> Result<(), FieldError> {
     if points.len() < min {
         return Err(FieldError::new(
             path.clone(),
@@ -98,4 +102,3 @@ pub(super) fn check_motion(path: &FieldPath, motion: &Option<Motion>) -> Result<
         }
     }
 }
-

@@ -8,7 +8,9 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, size, within};
+use ugv_fields::{
+    FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, size, within,
+};
 
 use crate::devices::gps::{GpsConfig, GpsDevice, GpsError};
 use crate::devices::laser::{LaserConfig, LaserDevice, LaserDeviceError};
@@ -327,7 +329,9 @@ impl Scenario {
         }
 
         self.gps.validate().map_err(|e| e.under(&at(&["gps"])))?;
-        self.laser.validate().map_err(|e| e.under(&at(&["laser"])))?;
+        self.laser
+            .validate()
+            .map_err(|e| e.under(&at(&["laser"])))?;
         self.devices
             .validate(&self.can.interface)
             .map_err(|e| e.under(&at(&["devices"])))?;
@@ -430,8 +434,6 @@ impl Scenario {
         Ok(())
     }
 }
-
-
 
 /// What the command line may change of a scenario (`ugv-sim run`, `suite --hil`).
 #[derive(Clone, Debug, Default)]

@@ -263,4 +263,3 @@ pub struct ControllerTuning {
     /// paper's); up to the laser's range.
     pub detection_radius: Option<f64>,
 }
-

@@ -140,10 +140,7 @@ fn finite(field: &'static str, v: f64) -> Result<(), FieldError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(invalid(
-            field,
-            format!("{v} is not a finite number"),
-        ))
+        Err(invalid(field, format!("{v} is not a finite number")))
     }
 }
 
@@ -292,4 +289,3 @@ impl LaserConfig {
         Ok(())
     }
 }
-

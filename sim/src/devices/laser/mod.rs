@@ -35,10 +35,9 @@
 //! same seed. Every beam draws the same number of random numbers whatever it hits, so
 //! the stream stays aligned across scans and scenes.
 
-use firmware_bridge::laser::{LASER_FRAME_VERSION, LaserFrame, MAX_BEAMS};
+use firmware_bridge::laser::{LASER_FRAME_VERSION, LaserFrame};
 use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
 use rand_distr::StandardNormal;
-use serde::{Deserialize, Serialize};
 
 use super::FieldError;
 use crate::scenario::schema::Obstacle;
