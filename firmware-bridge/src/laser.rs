@@ -54,6 +54,7 @@ mod ipc;
 
 use std::fmt;
 
+use iceoryx2::service::service_name::ServiceNameError;
 use serde::ser::{Serialize, SerializeStruct, Serializer};
 
 pub use frame::LaserFrame;
@@ -91,15 +92,75 @@ pub enum LaserError {
     BadIntensity { index: usize, value: f32 },
     #[error("laser frame needs {needed} beams, holds at most {max}", max = MAX_BEAMS)]
     TooManyBeams { needed: usize },
-    #[error("laser service name {name:?}: {reason}")]
-    ServiceName { name: String, reason: String },
-    /// An iceoryx2 call failed: what we were doing and iceoryx2's error.
-    #[error("laser service {service}: {action}: {reason}")]
+    /// iceoryx2 refused the service name.
+    #[error("laser service name {name:?}: {source:?}")]
+    ServiceName {
+        name: String,
+        #[source]
+        source: ServiceNameError,
+    },
+    /// An iceoryx2 call failed: the operation, and iceoryx2's error as the source (one
+    /// of its error types, which depends on `op`: downcast to inspect it). The message
+    /// shows the error's `Debug` form: some iceoryx2 `Display`s print `Self::Variant`.
+    #[error("laser service {service}: {op}: {source:?}")]
     Ipc {
         service: String,
-        action: &'static str,
-        reason: String,
+        op: IpcOp,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+/// The iceoryx2 operation behind a [`LaserError::Ipc`], and the iceoryx2 error type
+/// its source then has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum IpcOp {
+    /// `NodeName::new`: `SemanticStringError`.
+    NameNode,
+    /// `NodeBuilder::create`: `NodeCreationFailure`.
+    CreateNode,
+    /// Opening or creating the publish-subscribe service: `PublishSubscribeOpenOrCreateError`.
+    OpenFrameService,
+    /// Opening or creating the event service: `EventOpenOrCreateError`.
+    OpenEventService,
+    /// `PublisherCreateError`.
+    CreatePublisher,
+    /// `NotifierCreateError`.
+    CreateNotifier,
+    /// `SubscriberCreateError`.
+    CreateSubscriber,
+    /// `ListenerCreateError`.
+    CreateListener,
+    /// `Publisher::send_copy`: `SendError`.
+    SendFrame,
+    /// `Notifier::notify`: `NotifierNotifyError`.
+    Notify,
+    /// `Publisher::update_connections`: `ConnectionFailure`.
+    UpdateConnections,
+    /// `Subscriber::receive`: `ReceiveError`.
+    Receive,
+    /// `Listener::timed_wait`: `ListenerWaitError`.
+    WaitForFrame,
+}
+
+impl fmt::Display for IpcOp {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NameNode => "name the node",
+            Self::CreateNode => "create the node",
+            Self::OpenFrameService => "open the frame service",
+            Self::OpenEventService => "open the event service",
+            Self::CreatePublisher => "create the publisher",
+            Self::CreateNotifier => "create the notifier",
+            Self::CreateSubscriber => "create the subscriber",
+            Self::CreateListener => "create the listener",
+            Self::SendFrame => "send a frame",
+            Self::Notify => "notify the subscribers",
+            Self::UpdateConnections => "update connections",
+            Self::Receive => "receive",
+            Self::WaitForFrame => "wait for a frame",
+        })
+    }
 }
 
 impl LaserFrame {

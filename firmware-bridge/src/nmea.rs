@@ -8,8 +8,11 @@
 //!   partial lines, bad checksums and overlong lines, and yields typed
 //!   [`GpsReading`]s, one per receiver epoch, and counted [`SentenceError`]s.
 //! - [`NmeaLink`] joins a byte port (a serial device opened with [`open_serial`], or
-//!   anything `Read + Write`) to a reader; [`PtyEndpoint`] is the simulator's
-//!   pseudo-terminal, which also returns what the controller writes back.
+//!   anything `Read + Write`) to a reader: the controller's end.
+//! - [`LineEndpoint`] is the simulated receiver's end of the line over any byte port:
+//!   non-blocking writes that drop what does not fit, and what the controller writes
+//!   back, framed into lines. [`PtyEndpoint`] is one on a pseudo-terminal,
+//!   [`SerialEndpoint`] one on a physical serial device.
 //!
 //! # Position resolution
 //!
@@ -59,7 +62,11 @@
 //! # }
 //! ```
 
+mod decode;
 mod framing;
+mod line;
+mod link;
+mod pty;
 mod reader;
 mod serial;
 mod types;
@@ -69,8 +76,11 @@ use std::io;
 use std::path::PathBuf;
 
 pub use framing::{Framed, LineFramer, MAX_SENTENCE_LEN, checksum};
+pub use line::{BytePort, LineEndpoint};
+pub use link::NmeaLink;
+pub use pty::{Pty, PtyEndpoint};
 pub use reader::{GpsReading, NmeaReader, ReadEvent, ReaderConfig, ReaderStats};
-pub use serial::{NmeaLink, PtyEndpoint, SerialEndpoint, open_serial};
+pub use serial::{SerialEndpoint, open_serial};
 pub use types::{
     Accuracy, FixQuality, GpsFix, HeadingMode, NavStatus, PositioningMode, SentenceKind,
     SentenceSet, Talker,

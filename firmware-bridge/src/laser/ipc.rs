@@ -23,7 +23,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use super::{LaserError, LaserFrame};
+use super::{IpcOp, LaserError, LaserFrame};
 
 type Svc = ipc_threadsafe::Service;
 
@@ -34,11 +34,16 @@ const HISTORY: usize = 1;
 /// Subscribers one laser service supports (controller, recorder, echo, ...).
 const MAX_SUBSCRIBERS: usize = 8;
 
-fn ipc_err(service: &str, action: &'static str, error: impl std::fmt::Debug) -> LaserError {
+/// An iceoryx2 error of `op` on `service`, kept as the source.
+fn ipc_err(
+    service: &str,
+    op: IpcOp,
+    error: impl std::error::Error + Send + Sync + 'static,
+) -> LaserError {
     LaserError::Ipc {
         service: service.to_owned(),
-        action,
-        reason: format!("{error:?}"),
+        op,
+        source: Box::new(error),
     }
 }
 
@@ -50,16 +55,16 @@ struct Endpoint {
 }
 
 fn open(service: &str, node_name: &str) -> Result<Endpoint, LaserError> {
-    let name = ServiceName::new(service).map_err(|e| LaserError::ServiceName {
+    let name = ServiceName::new(service).map_err(|source| LaserError::ServiceName {
         name: service.to_owned(),
-        reason: format!("{e:?}"),
+        source,
     })?;
-    let node_name = NodeName::new(node_name).map_err(|e| ipc_err(service, "name the node", e))?;
+    let node_name = NodeName::new(node_name).map_err(|e| ipc_err(service, IpcOp::NameNode, e))?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
-        .map_err(|e| ipc_err(service, "create the node", e))?;
+        .map_err(|e| ipc_err(service, IpcOp::CreateNode, e))?;
     // Resources of processes that died (a crashed earlier run) would block the service.
     let cleanup = node.try_cleanup_dead_nodes();
     if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
@@ -77,12 +82,12 @@ fn open(service: &str, node_name: &str) -> Result<Endpoint, LaserError> {
         .max_subscribers(MAX_SUBSCRIBERS)
         .enable_safe_overflow(true)
         .open_or_create()
-        .map_err(|e| ipc_err(service, "open the frame service", e))?;
+        .map_err(|e| ipc_err(service, IpcOp::OpenFrameService, e))?;
     let events = node
         .service_builder(&name)
         .event()
         .open_or_create()
-        .map_err(|e| ipc_err(service, "open the event service", e))?;
+        .map_err(|e| ipc_err(service, IpcOp::OpenEventService, e))?;
     Ok(Endpoint {
         node,
         frames,
@@ -116,12 +121,12 @@ impl LaserPublisher {
             .frames
             .publisher_builder()
             .create()
-            .map_err(|e| ipc_err(service_name, "create the publisher", e))?;
+            .map_err(|e| ipc_err(service_name, IpcOp::CreatePublisher, e))?;
         let notifier = endpoint
             .events
             .notifier_builder()
             .create()
-            .map_err(|e| ipc_err(service_name, "create the notifier", e))?;
+            .map_err(|e| ipc_err(service_name, IpcOp::CreateNotifier, e))?;
         Ok(LaserPublisher {
             service: service_name.to_owned(),
             publisher,
@@ -142,10 +147,10 @@ impl LaserPublisher {
         let reached = self
             .publisher
             .send_copy(*frame)
-            .map_err(|e| ipc_err(&self.service, "send a frame", e))?;
+            .map_err(|e| ipc_err(&self.service, IpcOp::SendFrame, e))?;
         self.notifier
             .notify()
-            .map_err(|e| ipc_err(&self.service, "notify the subscribers", e))?;
+            .map_err(|e| ipc_err(&self.service, IpcOp::Notify, e))?;
         Ok(reached)
     }
 
@@ -155,10 +160,10 @@ impl LaserPublisher {
     pub fn update_connections(&self) -> Result<(), LaserError> {
         self.publisher
             .update_connections()
-            .map_err(|e| ipc_err(&self.service, "update connections", e))?;
+            .map_err(|e| ipc_err(&self.service, IpcOp::UpdateConnections, e))?;
         self.notifier
             .notify()
-            .map_err(|e| ipc_err(&self.service, "notify the subscribers", e))?;
+            .map_err(|e| ipc_err(&self.service, IpcOp::Notify, e))?;
         Ok(())
     }
 }
@@ -190,12 +195,12 @@ impl LaserSubscriber {
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)
             .create()
-            .map_err(|e| ipc_err(service_name, "create the subscriber", e))?;
+            .map_err(|e| ipc_err(service_name, IpcOp::CreateSubscriber, e))?;
         let listener = endpoint
             .events
             .listener_builder()
             .create()
-            .map_err(|e| ipc_err(service_name, "create the listener", e))?;
+            .map_err(|e| ipc_err(service_name, IpcOp::CreateListener, e))?;
         Ok(LaserSubscriber {
             service: service_name.to_owned(),
             subscriber,
@@ -215,7 +220,7 @@ impl LaserSubscriber {
         let sample = self
             .subscriber
             .receive()
-            .map_err(|e| ipc_err(&self.service, "receive", e))?;
+            .map_err(|e| ipc_err(&self.service, IpcOp::Receive, e))?;
         match sample {
             None => Ok(None),
             Some(sample) => {
@@ -258,7 +263,7 @@ impl LaserSubscriber {
                 Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {
                     return self.try_recv();
                 }
-                Err(e) => return Err(ipc_err(&self.service, "wait for a frame", e)),
+                Err(e) => return Err(ipc_err(&self.service, IpcOp::WaitForFrame, e)),
             }
         }
     }
@@ -274,5 +279,40 @@ mod tests {
     fn endpoints_can_move_to_other_threads() {
         assert_send::<LaserPublisher>();
         assert_send::<LaserSubscriber>();
+    }
+
+    #[test]
+    fn an_ipc_error_names_the_operation_and_keeps_iceoryx2s_error() {
+        use iceoryx2::port::listener::ListenerWaitError;
+        let e = ipc_err(
+            "svc",
+            IpcOp::WaitForFrame,
+            ListenerWaitError::InternalFailure,
+        );
+        assert_eq!(
+            e.to_string(),
+            "laser service svc: wait for a frame: InternalFailure"
+        );
+        let source = std::error::Error::source(&e).expect("a source");
+        assert_eq!(
+            source.downcast_ref::<ListenerWaitError>(),
+            Some(&ListenerWaitError::InternalFailure)
+        );
+    }
+
+    #[test]
+    fn a_bad_service_name_keeps_iceoryx2s_error() {
+        use iceoryx2::service::service_name::ServiceNameError;
+        let e = LaserSubscriber::new("").expect_err("an empty service name");
+        assert!(
+            matches!(
+                e,
+                LaserError::ServiceName {
+                    source: ServiceNameError::InvalidContent,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
     }
 }

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::path::Path;
 
-use firmware_bridge::nmea::{Framed, NmeaError, PtyEndpoint, SerialEndpoint};
+use firmware_bridge::nmea::{BytePort, Framed, LineEndpoint, PtyEndpoint, SerialEndpoint};
 
 use super::pacer::Pacer;
 use super::{GpsDevice, GpsEpoch, GpsError};
@@ -96,7 +96,8 @@ impl InputLog {
 /// 200 Hz a byte is at most 5 ms late and the line never runs faster than the baud.
 #[derive(Debug)]
 pub struct GpsPort {
-    line: Line,
+    /// The receiver's end of the line: a pty or a serial device.
+    line: LineEndpoint<Box<dyn BytePort>>,
     pacer: Pacer,
     input: InputLog,
     out: Vec<u8>,
@@ -109,31 +110,8 @@ pub struct GpsPort {
     dropped_bytes: u64,
 }
 
-/// The receiver's end of the line.
-#[derive(Debug)]
-enum Line {
-    Pty(PtyEndpoint),
-    Serial(SerialEndpoint),
-}
-
-impl Line {
-    fn send_some(&mut self, bytes: &[u8]) -> Result<usize, NmeaError> {
-        match self {
-            Line::Pty(p) => p.send_some(bytes),
-            Line::Serial(s) => s.send_some(bytes),
-        }
-    }
-
-    fn read_input(&mut self) -> Result<Vec<Framed>, NmeaError> {
-        match self {
-            Line::Pty(p) => p.read_input(),
-            Line::Serial(s) => s.read_input(),
-        }
-    }
-}
-
 impl GpsPort {
-    fn on(line: Line, baud: u32) -> GpsPort {
+    fn on(line: LineEndpoint<Box<dyn BytePort>>, baud: u32) -> GpsPort {
         GpsPort {
             line,
             pacer: Pacer::new(baud),
@@ -150,14 +128,14 @@ impl GpsPort {
     /// A pty, with a symlink at `link` if given (a stale symlink there is replaced,
     /// anything else refused), paced at `baud`.
     pub fn open(link: Option<&Path>, baud: u32) -> Result<GpsPort, GpsError> {
-        Ok(GpsPort::on(Line::Pty(PtyEndpoint::open(link)?), baud))
+        Ok(GpsPort::on(PtyEndpoint::open(link)?.boxed(), baud))
     }
 
     /// A physical serial device (a USB-serial adapter wired to the controller's
     /// board) set to `baud` and paced at it.
     pub fn serial(device: &Path, baud: u32) -> Result<GpsPort, GpsError> {
         Ok(GpsPort::on(
-            Line::Serial(SerialEndpoint::open(device, baud)?),
+            SerialEndpoint::open(device, baud)?.boxed(),
             baud,
         ))
     }
@@ -165,18 +143,12 @@ impl GpsPort {
     /// The path the controller opens: the pty's symlink, else its slave; or the
     /// serial device.
     pub fn path(&self) -> &Path {
-        match &self.line {
-            Line::Pty(p) => p.path(),
-            Line::Serial(s) => s.path(),
-        }
+        self.line.path()
     }
 
     /// The pty slave device (/dev/pts/N), or the serial device.
     pub fn slave_path(&self) -> &Path {
-        match &self.line {
-            Line::Pty(p) => p.slave_path(),
-            Line::Serial(s) => s.path(),
-        }
+        self.line.device()
     }
 
     /// Queue an epoch's sentences to go out from its epoch time on.

@@ -45,143 +45,36 @@
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within
 //!   `align_exit_deg`.
+//!
+//! # Files
+//!
+//! `frame` (the world and planning frames), `search` (where a replanning aims: the
+//! local goal and its detours), `pacing` (moving obstacles: the pace and the sweep),
+//! `align` (turning towards the goal first), `solver` (solving a replanning),
+//! `follower` (the steering laws) and `error`; this file keeps the navigator, which
+//! builds the requests, takes the outcomes and follows the path.
 
-use crate::anfis::AnfisModel;
-use crate::config::{ControllerConfig, FollowerKind};
+mod align;
+mod error;
+mod follower;
+mod frame;
+mod pacing;
+mod search;
+mod solver;
+
+pub use align::Align;
+pub use error::{GuidanceError, ReplanError};
+pub use follower::{FollowInputs, SteeringLaw};
+pub use frame::{Circle, PathFrame};
+pub use pacing::{Pacing, sweep};
+pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
+
+use crate::config::ControllerConfig;
 use crate::localisation::Pose;
-use crate::planner::{self, Interval, PlanOptions, PlanProblem, Trajectory};
+use crate::planner::{self, PlanProblem, Trajectory};
 use crate::route::{Route, RoutePoint};
-
-/// An obstacle for the planner, in the world frame.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Circle {
-    pub x: f64,
-    pub y: f64,
-    pub radius: f64,
-    pub vx: f64,
-    pub vy: f64,
-}
-
-/// A planning frame: origin on the route, x towards the local goal.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PathFrame {
-    pub ox: f64,
-    pub oy: f64,
-    pub angle: f64,
-    pub length: f64,
-}
-
-impl PathFrame {
-    pub fn new(start: (f64, f64), goal: (f64, f64)) -> PathFrame {
-        let (dx, dy) = (goal.0 - start.0, goal.1 - start.1);
-        PathFrame {
-            ox: start.0,
-            oy: start.1,
-            angle: dy.atan2(dx),
-            length: dx.hypot(dy),
-        }
-    }
-
-    pub fn to_path(&self, x: f64, y: f64) -> (f64, f64) {
-        let (c, s) = (self.angle.cos(), self.angle.sin());
-        let (dx, dy) = (x - self.ox, y - self.oy);
-        (c * dx + s * dy, -s * dx + c * dy)
-    }
-
-    pub fn to_world(&self, px: f64, py: f64) -> (f64, f64) {
-        let (c, s) = (self.angle.cos(), self.angle.sin());
-        (self.ox + c * px - s * py, self.oy + s * px + c * py)
-    }
-
-    pub fn rotate_to_path(&self, vx: f64, vy: f64) -> (f64, f64) {
-        let (c, s) = (self.angle.cos(), self.angle.sin());
-        (c * vx + s * vy, -s * vx + c * vy)
-    }
-}
-
-/// How far outside an inflated obstacle the car must be for the obstacle to be
-/// planned at its full size, metres.
-const MARGIN_SLACK: f64 = 0.05;
-
-fn wrap(a: f64) -> f64 {
-    firmware_bridge::geodesy::normalize_rad_pi(a)
-}
-
-/// What the follower sees: errors against the path at the vehicle's position.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct FollowInputs {
-    /// Signed lateral error (left of the path positive), metres.
-    pub e_y: f64,
-    /// Heading error, radians.
-    pub e_theta: f64,
-    /// The path's steering angle at this point (the optimal law's feed-forward), radians.
-    pub phi_ref: f64,
-    /// Speed, m/s.
-    pub v: f64,
-}
-
-impl FollowInputs {
-    /// The inputs an ANFIS follower takes, in this order.
-    pub const NAMES: [&'static str; 3] = ["e_y", "e_theta", "phi_ref"];
-}
-
-/// The steering law.
-#[derive(Debug, Clone)]
-pub enum SteeringLaw {
-    /// phi = phi_ref - k_y e_y - k_theta e_theta, gains scheduled on speed so the
-    /// lateral error has natural frequency omega and damping zeta.
-    Optimal {
-        omega: f64,
-        zeta: f64,
-        wheelbase: f64,
-    },
-    Anfis(Box<AnfisModel>),
-}
-
-impl SteeringLaw {
-    /// The steering angle to command, radians (before the actuator limit).
-    pub fn steer(&self, i: &FollowInputs) -> f64 {
-        match self {
-            SteeringLaw::Optimal {
-                omega,
-                zeta,
-                wheelbase,
-            } => {
-                let v = i.v.abs().max(0.5);
-                let k_y = omega * omega * wheelbase / (v * v);
-                let k_theta = 2.0 * zeta * omega * wheelbase / v;
-                i.phi_ref - k_y * i.e_y - k_theta * i.e_theta
-            }
-            // A model that cannot evaluate (it validated at load) falls back to the
-            // feed-forward alone rather than to a wild command.
-            SteeringLaw::Anfis(m) => m
-                .predict(&[i.e_y, i.e_theta, i.phi_ref])
-                .unwrap_or(i.phi_ref),
-        }
-    }
-}
-
-/// One replanning, kept for the run's figure and report.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct PlanRecord {
-    pub time: f64,
-    pub feasible: bool,
-    pub a6: Option<f64>,
-    pub projected_to_boundary: bool,
-    pub max_steer_deg: Option<f64>,
-    /// The planned path in the world frame.
-    pub path: Vec<[f64; 2]>,
-    /// The pace planned, dx/dt along the start-goal line, m/s (None when infeasible).
-    #[serde(default)]
-    pub pace: Option<f64>,
-    /// Whether moving obstacles were planned in space-time (the pace was searched).
-    #[serde(default)]
-    pub moving: bool,
-    /// Set when the car heads too far from the line to plan: turn on this road-wheel
-    /// angle (radians) towards the goal first.
-    #[serde(default)]
-    pub align: Option<f64>,
-}
+use frame::{clip_to_start, wrap};
+use search::{MAX_GOAL_HEADING, MAX_LOCAL_HEADING};
 
 /// What guidance asks of the actuators.
 #[derive(Clone, Debug, PartialEq)]
@@ -203,29 +96,6 @@ pub enum Guidance {
 /// for (per call: progress is updated every control tick), metres.
 const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
-/// Step of the search for a clear local goal along the route, metres.
-const LOCAL_GOAL_STEP: f64 = 1.0;
-/// Sideways shifts of a detour's local goal, metres (negative: right).
-const DETOUR_SHIFTS: [f64; 7] = [0.0, -1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
-/// Most detours tried per replanning.
-const MAX_DETOURS: usize = 8;
-
-/// Whether `p` lies outside every static obstacle grown by `r0`.
-fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
-    obstacles
-        .iter()
-        .filter(|o| o.vx == 0.0 && o.vy == 0.0)
-        .all(|o| (o.x - p.x).hypot(o.y - p.y) > o.radius + r0)
-}
-
-/// The stretch of route before a local goal that must be clear of obstacles, metres.
-const LOCAL_GOAL_APPROACH: f64 = 5.0;
-/// A local goal's heading in its frame is kept within this (y(x) cannot arrive
-/// steeper), radians.
-const MAX_GOAL_HEADING: f64 = 1.2;
-/// A local goal before the goal arrives within this of its chord, so that round a
-/// corner the car turns over several replannings instead of at once, radians.
-const MAX_LOCAL_HEADING: f64 = 0.5;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -247,47 +117,13 @@ pub struct Navigator {
     next_replan: f64,
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
-    planner_error: Option<String>,
+    planner_error: Option<ReplanError>,
     pub plans: Vec<PlanRecord>,
-}
-
-/// Why guidance could not be set up.
-#[derive(Debug, thiserror::Error)]
-pub enum GuidanceError {
-    #[error("loading the ANFIS model {path}: {source}")]
-    Anfis {
-        path: String,
-        #[source]
-        source: crate::anfis::AnfisError,
-    },
-    #[error(
-        "the ANFIS model {path} takes {found} inputs; the follower gives 3 (e_y, e_theta, phi_ref)"
-    )]
-    AnfisInputs { path: String, found: usize },
 }
 
 impl Navigator {
     pub fn new(cfg: &ControllerConfig) -> Result<Navigator, GuidanceError> {
-        let law = match (&cfg.follower.kind, &cfg.follower.anfis_model) {
-            (FollowerKind::Anfis, Some(path)) => {
-                let model = AnfisModel::load(path).map_err(|source| GuidanceError::Anfis {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-                if model.n_inputs() != 3 {
-                    return Err(GuidanceError::AnfisInputs {
-                        path: path.display().to_string(),
-                        found: model.n_inputs(),
-                    });
-                }
-                SteeringLaw::Anfis(Box::new(model))
-            }
-            _ => SteeringLaw::Optimal {
-                omega: cfg.follower.omega,
-                zeta: cfg.follower.zeta,
-                wheelbase: cfg.vehicle.wheelbase,
-            },
-        };
+        let law = SteeringLaw::from_config(cfg)?;
         let route = Route::new(&cfg.mission);
         let points = route.points();
         let last_leg = PathFrame::new(points[points.len() - 2], points[points.len() - 1]);
@@ -321,62 +157,19 @@ impl Navigator {
     pub fn local_goal(&self, s: f64, obstacles: &[Circle]) -> RoutePoint {
         let pc = &self.cfg.planner;
         let r0 = self.cfg.vehicle.radius + pc.safety_margin;
-        let end = self.route.length();
-        let nominal = (s + pc.horizon_m).min(end);
-        // The route's last LOCAL_GOAL_APPROACH before the goal is clear too, so a plan
-        // can arrive on it with its heading.
-        let clear = |g: &RoutePoint| {
-            let n = (LOCAL_GOAL_APPROACH / LOCAL_GOAL_STEP) as usize;
-            (0..=n)
-                .map(|k| self.route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
-                .all(|p| clear_of(&p, obstacles, r0))
-        };
-        let steps = ((end - nominal) / LOCAL_GOAL_STEP).ceil() as usize;
-        let back = ((pc.horizon_m - pc.horizon_min_m).max(0.0) / LOCAL_GOAL_STEP) as usize;
-        let on = (0..=steps).map(|i| (nominal + i as f64 * LOCAL_GOAL_STEP).min(end));
-        let nearer = (1..=back).map(|i| nominal - i as f64 * LOCAL_GOAL_STEP);
-        on.chain(nearer.filter(|&g| g > s))
-            .map(|g| self.route.local_goal(g))
-            .find(clear)
-            .unwrap_or_else(|| self.route.local_goal(nominal))
+        search::local_goal(&self.route, pc, r0, s, obstacles)
     }
 
     /// Local goals to try when the first has no feasible path (detours): the first
     /// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
     /// its distance, unshifted and shifted the same; each clear of every inflated
     /// static obstacle; at most `MAX_DETOURS`. The order is the stated cost, and the
-    /// first with a feasible path wins: the least lateral shift, then the farther
-    /// goal, then right before left.
+    /// first with a feasible path wins: the least lateral shift, then the farther goal,
+    /// then right before left.
     pub fn detours(&self, s: f64, first: &RoutePoint, obstacles: &[Circle]) -> Vec<RoutePoint> {
-        let r0 = self.cfg.vehicle.radius + self.cfg.planner.safety_margin;
-        let half = self.route.at(s + (first.s - s) / 2.0);
-        let mut tries: Vec<(f64, RoutePoint)> = Vec::new();
-        for (i, base) in [*first, half].into_iter().enumerate() {
-            if base.s - s < self.cfg.planner.horizon_min_m / 2.0 {
-                continue;
-            }
-            let (nx, ny) = (-base.heading.sin(), base.heading.cos());
-            for shift in DETOUR_SHIFTS {
-                if i == 0 && shift == 0.0 {
-                    continue;
-                }
-                let g = RoutePoint {
-                    x: base.x + shift * nx,
-                    y: base.y + shift * ny,
-                    ..base
-                };
-                if clear_of(&g, obstacles, r0) {
-                    tries.push((shift, g));
-                }
-            }
-        }
-        // Stable: right before left stays from DETOUR_SHIFTS.
-        tries.sort_by(|a, b| {
-            a.0.abs()
-                .total_cmp(&b.0.abs())
-                .then(b.1.s.total_cmp(&a.1.s))
-        });
-        tries.into_iter().take(MAX_DETOURS).map(|t| t.1).collect()
+        let pc = &self.cfg.planner;
+        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
+        search::detours(&self.route, pc, r0, s, first, obstacles)
     }
 
     /// The planning problem towards `goal` from `pose` at `now`, in the frame from the
@@ -621,372 +414,9 @@ impl Navigator {
     }
 }
 
-/// One replanning to do: the problem in the planning frame and the steering limit.
-#[derive(Clone, Debug)]
-pub struct PlanRequest {
-    pub time: f64,
-    pub problem: PlanProblem,
-    /// Road-wheel angle a planned path may use, radians.
-    pub steer_limit: f64,
-    frame: PathFrame,
-    /// Problems towards other local goals (with their frames), tried in order when
-    /// `problem` has no feasible path.
-    pub detours: Vec<(PlanProblem, PathFrame)>,
-    /// Set when moving obstacles are in view: the paces to try.
-    pub pacing: Option<Pacing>,
-    /// Set when the car heads too far from the line: turn towards the goal first.
-    pub align: Option<Align>,
-}
-
-/// A car's nearest thing to turning on the spot: full planned lock at low speed, until
-/// the heading is within reach of a y(x) path. Taken only when the whole turning
-/// circle (grown by the planner's vehicle radius) is clear of every obstacle.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Align {
-    /// The rear axle's pose, world frame.
-    pub x: f64,
-    pub y: f64,
-    pub theta: f64,
-    /// Turning left is the short way round.
-    pub prefer_left: bool,
-    /// Turning radius of the rear axle at the planned steering limit, metres.
-    pub turn_radius: f64,
-    /// Obstacles in the world frame.
-    pub obstacles: Vec<Circle>,
-}
-
-impl Align {
-    /// Whether the full turning circle to the left (or right) is clear: every obstacle
-    /// is farther than its radius plus `r0` from the circle the rear axle drives.
-    pub fn clear(&self, left: bool, r0: f64) -> bool {
-        let s = if left { 1.0 } else { -1.0 };
-        let r = self.turn_radius;
-        let (cx, cy) = (
-            self.x - s * r * self.theta.sin(),
-            self.y + s * r * self.theta.cos(),
-        );
-        self.obstacles
-            .iter()
-            .all(|o| ((o.x - cx).hypot(o.y - cy) - r).abs() > o.radius + r0)
-    }
-
-    /// The road-wheel angle to turn with (the short way if clear, else the long way),
-    /// or None when neither turning circle is clear.
-    pub fn steer(&self, r0: f64, steer_limit: f64) -> Option<f64> {
-        [self.prefer_left, !self.prefer_left]
-            .into_iter()
-            .find(|left| self.clear(*left, r0))
-            .map(|left| if left { steer_limit } else { -steer_limit })
-    }
-}
-
-/// The second free parameter around moving obstacles: the pace (t_f), and how moving
-/// obstacles are swept for it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Pacing {
-    /// dx/dt to try, m/s, fastest first.
-    pub speeds: Vec<f64>,
-    /// The car's speed now, m/s.
-    pub speed_now: f64,
-    /// Acceleration and deceleration the car changes pace with, m/s^2.
-    pub accel: f64,
-    pub decel: f64,
-    /// Moving obstacles are swept over +- this long along their velocity, seconds.
-    pub time_margin: f64,
-    /// Weight of the time lost by a slower pace against the path's deviation, m^3/s.
-    pub time_weight: f64,
-}
-
-impl Pacing {
-    /// The score of a feasible path at `pace` (lower is better): its mean squared
-    /// deviation from the start-goal line (J / span, m^2) plus `time_weight` times the
-    /// time per metre lost against the fastest pace. Yielding by slowing down beats a
-    /// wide swerve at full pace.
-    pub fn score(&self, mean_sq_deviation: f64, pace: f64, fastest: f64) -> f64 {
-        mean_sq_deviation + self.time_weight * (1.0 / pace - 1.0 / fastest)
-    }
-
-    /// How far off the planned schedule the car ends up while changing from its
-    /// current speed to `pace` (the plan assumes the pace from t_k on), as time at
-    /// that pace, seconds.
-    pub fn schedule_slip(&self, pace: f64) -> f64 {
-        let dv = pace - self.speed_now;
-        let a = if dv > 0.0 { self.accel } else { self.decel };
-        if pace <= 0.0 || a <= 0.0 {
-            return 0.0;
-        }
-        dv * dv / (2.0 * a * pace)
-    }
-}
-
-/// The radius to plan a static obstacle with: its own, or less where the car at
-/// (px, py) is already within the inflated radius r0 (plus a slack).
-fn clip_to_start(radius: f64, x: f64, y: f64, px: f64, py: f64, r0: f64) -> f64 {
-    let gap = (px - x).hypot(py - y) - r0 - MARGIN_SLACK;
-    radius.min(gap.max(0.0))
-}
-
-/// A moving obstacle swept over [-margin, +margin] seconds along its velocity: a chain
-/// of circles (each moving with it) spaced at most half the inflated radius (r + r0)
-/// apart, so the inflated chain covers the inflated capsule to within 3 % of r + r0.
-/// Circles the car at (px, py) already overlaps are shrunk as for static obstacles.
-pub fn sweep(
-    o: &planner::Obstacle,
-    margin: f64,
-    px: f64,
-    py: f64,
-    r0: f64,
-) -> Vec<planner::Obstacle> {
-    let speed = o.vx.hypot(o.vy);
-    let reach = speed * margin;
-    let spacing = (0.5 * (o.radius + r0)).max(0.05);
-    let n = ((2.0 * reach / spacing).ceil() as usize).clamp(0, 64);
-    (0..=n)
-        .map(|j| {
-            let s = if n == 0 {
-                0.0
-            } else {
-                -margin + 2.0 * margin * j as f64 / n as f64
-            };
-            let (x, y) = (o.x + o.vx * s, o.y + o.vy * s);
-            planner::Obstacle {
-                x,
-                y,
-                radius: clip_to_start(o.radius, x, y, px, py, r0),
-                vx: o.vx,
-                vy: o.vy,
-            }
-        })
-        .collect()
-}
-
-/// A finished replanning: the path (None when no feasible path exists) and its
-/// record, or why the planner refused the problem.
-#[derive(Clone, Debug)]
-pub struct PlanOutcome {
-    pub time: f64,
-    /// The frame it was planned in.
-    pub frame: PathFrame,
-    pub result: Result<(Option<Trajectory>, PlanRecord), String>,
-}
-
-/// Solve a replanning (pure: runs inline or on a planning thread). Among the feasible
-/// a6 it takes the cheapest whose path stays within the steering limit, since the
-/// method itself has none.
-///
-/// With moving obstacles in view ([`PlanRequest::pacing`]) the pace is a second free
-/// parameter: each pace sets t_f, every moving obstacle is swept over the time margin
-/// plus the schedule slip of that pace ([`sweep`], [`Pacing::schedule_slip`]), and the
-/// fastest pace with a feasible path is taken. The Qu et al. constraint is then a
-/// space-time one: the obstacle's predicted position at the instant the car is at each
-/// x. With no pace feasible the car stops (it yields).
-///
-/// The local goal's problem is solved first; when it has no feasible path, the
-/// detours' problems in their order ([`PlanRequest::detours`]), and the first with
-/// one is taken, in its own frame ([`PlanOutcome::frame`]).
-pub fn solve(req: &PlanRequest) -> PlanOutcome {
-    if let Some(align) = &req.align {
-        let (_, mut record) = record(req.time, &req.frame, None, false);
-        record.align = align.steer(req.problem.vehicle_radius, req.steer_limit);
-        record.feasible = record.align.is_some();
-        return PlanOutcome {
-            time: req.time,
-            frame: req.frame,
-            result: Ok((None, record)),
-        };
-    }
-    // The local goal, then the detours in order: the first with a feasible path.
-    let mut nominal = None;
-    let tries =
-        std::iter::once((&req.problem, req.frame)).chain(req.detours.iter().map(|(p, f)| (p, *f)));
-    for (problem, frame) in tries {
-        let result = solve_towards(req, problem, &frame);
-        let outcome = PlanOutcome {
-            time: req.time,
-            frame,
-            result,
-        };
-        match &outcome.result {
-            Ok((None, _)) => {
-                nominal.get_or_insert(outcome);
-            }
-            _ => return outcome,
-        }
-    }
-    nominal.unwrap_or(PlanOutcome {
-        time: req.time,
-        frame: req.frame,
-        result: Err("no planning problem".to_owned()),
-    })
-}
-
-/// One local goal's planning problem solved (see [`solve`]).
-fn solve_towards(
-    req: &PlanRequest,
-    p: &PlanProblem,
-    frame: &PathFrame,
-) -> Result<(Option<Trajectory>, PlanRecord), String> {
-    let Some(pacing) = &req.pacing else {
-        let chosen = solve_one(p, req.steer_limit)?;
-        return Ok(record(req.time, frame, chosen, false));
-    };
-    let span = p.goal.x - p.state.x;
-    let line = p.reference_line().map_err(|e| e.to_string())?;
-    let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
-    let mut best: Option<(f64, Chosen)> = None;
-    for &pace in &pacing.speeds {
-        let margin = pacing.time_margin + pacing.schedule_slip(pace);
-        let mut problem = p.clone();
-        problem.t_f = p.t_k + span / pace;
-        problem.obstacles = p
-            .obstacles
-            .iter()
-            .flat_map(|o| {
-                if o.vx == 0.0 && o.vy == 0.0 {
-                    vec![*o]
-                } else {
-                    sweep(o, margin, p.state.x, p.state.y, p.vehicle_radius)
-                }
-            })
-            .collect();
-        if let Some(c) = solve_one(&problem, req.steer_limit)? {
-            let score = pacing.score(
-                c.trajectory.path().reference_cost(&line) / span.abs(),
-                pace,
-                fastest,
-            );
-            if best.as_ref().is_none_or(|b| score < b.0) {
-                best = Some((score, c));
-            }
-        }
-    }
-    Ok(record(req.time, frame, best.map(|b| b.1), true))
-}
-
-/// The chosen path of one planning problem: the planner's a6 when its path is within
-/// the steering limit, else the cheapest feasible a6 whose path is; None when none.
-fn solve_one(problem: &PlanProblem, steer_limit: f64) -> Result<Option<Chosen>, String> {
-    let step = planner::plan_with(problem, &PlanOptions::default()).map_err(|e| e.to_string())?;
-    let projected = step.result.projected_to_boundary;
-    let within = !step
-        .result
-        .max_abs_steering
-        .is_some_and(|s| s > steer_limit);
-    if within {
-        return Ok(step
-            .trajectory
-            .zip(step.result.a6_chosen)
-            .map(|(trajectory, a6)| Chosen {
-                trajectory,
-                a6,
-                projected,
-            }));
-    }
-    let line =
-        planner::ReferenceLine::new(0.0, 0.0, problem.goal.x, 0.0).map_err(|e| e.to_string())?;
-    let mut best: Option<(f64, f64, Trajectory)> = None;
-    for candidate in candidates(step.result.a6_unconstrained, &step.result.feasible_set) {
-        let Ok(t) = problem.trajectory(candidate) else {
-            continue;
-        };
-        if max_steer(&t) > steer_limit {
-            continue;
-        }
-        let cost = t.path().reference_cost(&line);
-        if best.as_ref().is_none_or(|b| cost < b.0) {
-            best = Some((cost, candidate, t));
-        }
-    }
-    Ok(best.map(|(_, a6, trajectory)| Chosen {
-        trajectory,
-        a6,
-        projected,
-    }))
-}
-
-/// A feasible path of one planning problem.
-struct Chosen {
-    trajectory: Trajectory,
-    a6: f64,
-    projected: bool,
-}
-
-fn record(
-    time: f64,
-    frame: &PathFrame,
-    chosen: Option<Chosen>,
-    moving: bool,
-) -> (Option<Trajectory>, PlanRecord) {
-    let record = PlanRecord {
-        time,
-        feasible: chosen.is_some(),
-        a6: chosen.as_ref().map(|c| c.a6),
-        projected_to_boundary: chosen.as_ref().is_some_and(|c| c.projected),
-        max_steer_deg: chosen
-            .as_ref()
-            .map(|c| max_steer(&c.trajectory).to_degrees()),
-        path: chosen.as_ref().map_or_else(Vec::new, |c| {
-            let p = c.trajectory.path();
-            (0..=40)
-                .map(|j| {
-                    let x = p.x_k() + p.span() * f64::from(j) / 40.0;
-                    let (wx, wy) = frame.to_world(x, p.y(x));
-                    [wx, wy]
-                })
-                .collect()
-        }),
-        pace: chosen.as_ref().map(|c| c.trajectory.w1()),
-        moving,
-        align: None,
-    };
-    (chosen.map(|c| c.trajectory), record)
-}
-
-/// Maximum steering angle along a path, radians.
-fn max_steer(t: &Trajectory) -> f64 {
-    let p = t.path();
-    (0..=200)
-        .map(|j| {
-            p.steering_angle(p.x_k() + p.span() * f64::from(j) / 200.0)
-                .abs()
-        })
-        .fold(0.0, f64::max)
-}
-
-/// a6 values to try inside the feasible set: its finite boundaries, the unconstrained
-/// optimum clamped into each piece, and a spread through each piece.
-fn candidates(a6_star: f64, feasible: &[Interval]) -> Vec<f64> {
-    let mut out = Vec::new();
-    let scale = feasible
-        .iter()
-        .flat_map(|i| [i.lo, i.hi])
-        .chain([a6_star])
-        .filter(|v| v.is_finite())
-        .map(f64::abs)
-        .fold(0.0, f64::max)
-        .max(1e-12);
-    for i in feasible {
-        let lo = if i.lo.is_finite() {
-            i.lo
-        } else {
-            i.hi.min(a6_star) - 4.0 * scale
-        };
-        let hi = if i.hi.is_finite() {
-            i.hi
-        } else {
-            i.lo.max(a6_star) + 4.0 * scale
-        };
-        out.push(i.clamp(a6_star));
-        for j in 0..=64 {
-            out.push(lo + (hi - lo) * f64::from(j) / 64.0);
-        }
-    }
-    out.retain(|v| v.is_finite() && feasible.iter().any(|i| i.contains(*v)));
-    out
-}
-
 #[cfg(test)]
 mod tests {
+    use super::search::{MAX_DETOURS, clear_of};
     use super::*;
 
     fn replan_and_follow(nav: &mut Navigator, pose: &Pose, obstacles: &[Circle]) -> Guidance {
@@ -994,42 +424,6 @@ mod tests {
         nav.issued(0.0);
         nav.accept(solve(&nav.request(0.0, pose, obstacles)));
         nav.follow(pose)
-    }
-
-    #[test]
-    fn path_frame_round_trips_and_points_at_the_goal() {
-        let f = PathFrame::new((0.0, 0.0), (30.0, 15.0));
-        let (px, py) = f.to_path(30.0, 15.0);
-        assert!((px - f.length).abs() < 1e-12 && py.abs() < 1e-12);
-        let (x, y) = f.to_world(3.0, -2.0);
-        let (bx, by) = f.to_path(x, y);
-        assert!((bx - 3.0).abs() < 1e-12 && (by + 2.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn optimal_law_corrects_towards_the_path() {
-        let law = SteeringLaw::Optimal {
-            omega: 0.9,
-            zeta: 0.8,
-            wheelbase: 1.65,
-        };
-        let base = FollowInputs {
-            e_y: 0.0,
-            e_theta: 0.0,
-            phi_ref: 0.1,
-            v: 2.0,
-        };
-        assert_eq!(law.steer(&base), 0.1, "on the path: the feed-forward alone");
-        assert!(
-            law.steer(&FollowInputs { e_y: 0.5, ..base }) < 0.1,
-            "left of the path: steer right"
-        );
-        assert!(
-            law.steer(&FollowInputs {
-                e_theta: -0.1,
-                ..base
-            }) > 0.1
-        );
     }
 
     #[test]
@@ -1121,61 +515,6 @@ mod tests {
             replan_and_follow(&mut nav, &along(29.8), &[blocker]),
             Guidance::Stop { .. }
         ));
-    }
-
-    #[test]
-    fn a_moving_obstacle_is_swept_along_its_velocity_over_the_margin() {
-        let o = planner::Obstacle {
-            x: 10.0,
-            y: -3.0,
-            radius: 0.5,
-            vx: 0.0,
-            vy: 1.3,
-        };
-        let chain = sweep(&o, 1.0, 0.0, 0.0, 2.3);
-        let first = chain.first().expect("circles");
-        let last = chain.last().expect("circles");
-        assert!((first.y - (-4.3)).abs() < 1e-12 && (last.y - (-1.7)).abs() < 1e-12);
-        assert!(
-            chain
-                .iter()
-                .all(|c| c.vy == 1.3 && c.x == 10.0 && c.radius == 0.5)
-        );
-        let spacing = chain
-            .windows(2)
-            .map(|w| w[1].y - w[0].y)
-            .fold(0.0, f64::max);
-        assert!(spacing <= 0.5 * (0.5 + 2.3) + 1e-12, "{spacing}");
-        // A circle the car already overlaps is shrunk to just clear of it.
-        let near = sweep(&o, 1.0, 10.0, -6.0, 2.3);
-        assert!(near.iter().any(|c| c.radius < 0.5));
-        assert!(
-            near.iter()
-                .all(|c| (c.x - 10.0).hypot(c.y + 6.0) >= c.radius + 2.3 - 1e-9 || c.radius == 0.0)
-        );
-        // A static obstacle is one circle.
-        assert_eq!(
-            sweep(&planner::Obstacle { vy: 0.0, ..o }, 1.0, 0.0, 0.0, 2.3).len(),
-            1
-        );
-    }
-
-    #[test]
-    fn schedule_slip_and_pace_score() {
-        let pacing = Pacing {
-            speeds: vec![2.0, 1.0],
-            speed_now: 2.0,
-            accel: 1.0,
-            decel: 1.0,
-            time_margin: 1.0,
-            time_weight: 2.0,
-        };
-        assert_eq!(pacing.schedule_slip(2.0), 0.0);
-        // Slowing from 2 to 1 m/s at 1 m/s^2 takes 1 s and 1.5 m instead of 1 m.
-        assert!((pacing.schedule_slip(1.0) - 0.5).abs() < 1e-12);
-        // A straight path at half pace beats a 1.5 m swerve at full pace, not a 0.5 m one.
-        assert!(pacing.score(0.0, 1.0, 2.0) < pacing.score(1.5, 2.0, 2.0));
-        assert!(pacing.score(0.0, 1.0, 2.0) > pacing.score(0.5, 2.0, 2.0));
     }
 
     #[test]

@@ -1,0 +1,108 @@
+//! Where a replanning aims: the local goal `horizon_m` along the route from the car's
+//! progress, moved on along the route or back towards the car until it and its
+//! approach are clear of every inflated static obstacle, and the detours tried when it
+//! has no feasible path: local goals shifted sideways or at half the distance, ordered
+//! by their stated cost.
+
+use super::frame::Circle;
+use crate::config::PlannerConfig;
+use crate::route::{Route, RoutePoint};
+
+/// Step of the search for a clear local goal along the route, metres.
+const LOCAL_GOAL_STEP: f64 = 1.0;
+/// Sideways shifts of a detour's local goal, metres (negative: right).
+const DETOUR_SHIFTS: [f64; 7] = [0.0, -1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
+/// Most detours tried per replanning.
+pub(super) const MAX_DETOURS: usize = 8;
+
+/// Whether `p` lies outside every static obstacle grown by `r0`.
+pub(super) fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
+    obstacles
+        .iter()
+        .filter(|o| o.vx == 0.0 && o.vy == 0.0)
+        .all(|o| (o.x - p.x).hypot(o.y - p.y) > o.radius + r0)
+}
+
+/// The stretch of route before a local goal that must be clear of obstacles, metres.
+const LOCAL_GOAL_APPROACH: f64 = 5.0;
+/// A local goal's heading in its frame is kept within this (y(x) cannot arrive
+/// steeper), radians.
+pub(super) const MAX_GOAL_HEADING: f64 = 1.2;
+/// A local goal before the goal arrives within this of its chord, so that round a
+/// corner the car turns over several replannings instead of at once, radians.
+pub(super) const MAX_LOCAL_HEADING: f64 = 0.5;
+
+/// The local goal on `route` from progress `s`: `horizon_m` further along the route
+/// (the goal once that near), moved on along the route, or else back towards the car,
+/// until it lies outside every static obstacle grown by `r0`; the nominal one when
+/// none does (the planner then finds no path, and the car stops).
+pub(super) fn local_goal(
+    route: &Route,
+    pc: &PlannerConfig,
+    r0: f64,
+    s: f64,
+    obstacles: &[Circle],
+) -> RoutePoint {
+    let end = route.length();
+    let nominal = (s + pc.horizon_m).min(end);
+    // The route's last LOCAL_GOAL_APPROACH before the goal is clear too, so a plan
+    // can arrive on it with its heading.
+    let clear = |g: &RoutePoint| {
+        let n = (LOCAL_GOAL_APPROACH / LOCAL_GOAL_STEP) as usize;
+        (0..=n)
+            .map(|k| route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
+            .all(|p| clear_of(&p, obstacles, r0))
+    };
+    let steps = ((end - nominal) / LOCAL_GOAL_STEP).ceil() as usize;
+    let back = ((pc.horizon_m - pc.horizon_min_m).max(0.0) / LOCAL_GOAL_STEP) as usize;
+    let on = (0..=steps).map(|i| (nominal + i as f64 * LOCAL_GOAL_STEP).min(end));
+    let nearer = (1..=back).map(|i| nominal - i as f64 * LOCAL_GOAL_STEP);
+    on.chain(nearer.filter(|&g| g > s))
+        .map(|g| route.local_goal(g))
+        .find(clear)
+        .unwrap_or_else(|| route.local_goal(nominal))
+}
+
+/// Local goals to try when the first has no feasible path (detours): the first
+/// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
+/// its distance, unshifted and shifted the same; each clear of every static obstacle
+/// grown by `r0`; at most `MAX_DETOURS`. The order is the stated cost, and the first
+/// with a feasible path wins: the least lateral shift, then the farther goal, then
+/// right before left.
+pub(super) fn detours(
+    route: &Route,
+    pc: &PlannerConfig,
+    r0: f64,
+    s: f64,
+    first: &RoutePoint,
+    obstacles: &[Circle],
+) -> Vec<RoutePoint> {
+    let half = route.at(s + (first.s - s) / 2.0);
+    let mut tries: Vec<(f64, RoutePoint)> = Vec::new();
+    for (i, base) in [*first, half].into_iter().enumerate() {
+        if base.s - s < pc.horizon_min_m / 2.0 {
+            continue;
+        }
+        let (nx, ny) = (-base.heading.sin(), base.heading.cos());
+        for shift in DETOUR_SHIFTS {
+            if i == 0 && shift == 0.0 {
+                continue;
+            }
+            let g = RoutePoint {
+                x: base.x + shift * nx,
+                y: base.y + shift * ny,
+                ..base
+            };
+            if clear_of(&g, obstacles, r0) {
+                tries.push((shift, g));
+            }
+        }
+    }
+    // Stable: right before left stays from DETOUR_SHIFTS.
+    tries.sort_by(|a, b| {
+        a.0.abs()
+            .total_cmp(&b.0.abs())
+            .then(b.1.s.total_cmp(&a.1.s))
+    });
+    tries.into_iter().take(MAX_DETOURS).map(|t| t.1).collect()
+}
