@@ -6,20 +6,11 @@
 
 use std::collections::VecDeque;
 
+use firmware_bridge::can::membus::{ArbitrationStats, frame_bits_worst};
 use serde::Serialize;
 
 /// The window the peak load is taken over, seconds.
 pub const PEAK_WINDOW_S: f64 = 0.1;
-
-/// Bits on the wire of a CAN 2.0A (11-bit ID) data frame of `dlc` data bytes, with the
-/// most stuff bits it can need: SOF, ID, RTR, IDE, r0, DLC, data and CRC (34 + 8 n
-/// bits) can take a stuff bit after every four, then the CRC delimiter, ACK, EOF and
-/// the interframe space (13 bits) are never stuffed.
-pub fn frame_bits_worst(dlc: usize) -> u64 {
-    let data = 8 * dlc.min(8) as u64;
-    let stuffable = 34 + data;
-    stuffable + (stuffable - 1) / 4 + 13
-}
 
 /// The load figures of a run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -35,6 +26,9 @@ pub struct BusLoadReport {
     pub peak_pct: f64,
     /// When that window ended, simulated seconds.
     pub peak_at_s: f64,
+    /// The arbitration of a bus with the wire's time (SIL with `can.bit_timing`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arbitration: Option<ArbitrationStats>,
 }
 
 /// The running count.
@@ -48,6 +42,7 @@ pub struct BusLoad {
     peak_bits: u64,
     peak_at_s: f64,
     last_s: f64,
+    arbitration: Option<ArbitrationStats>,
 }
 
 impl BusLoad {
@@ -61,12 +56,13 @@ impl BusLoad {
             peak_bits: 0,
             peak_at_s: 0.0,
             last_s: 0.0,
+            arbitration: None,
         }
     }
 
     /// `frames` eight-byte frames crossed the bus in the step ending at `now`.
     pub fn step(&mut self, now: f64, frames: u64) {
-        let bits = frames * frame_bits_worst(8);
+        let bits = frames * frame_bits_worst(false, 8);
         self.frames += frames;
         self.bits += bits;
         self.last_s = now;
@@ -87,6 +83,11 @@ impl BusLoad {
         }
     }
 
+    /// What the arbitration of a bus with the wire's time did, for the report.
+    pub fn arbitrated(&mut self, stats: ArbitrationStats) {
+        self.arbitration = Some(stats);
+    }
+
     pub fn report(&self) -> BusLoadReport {
         let rate = f64::from(self.bit_rate.max(1));
         BusLoadReport {
@@ -100,6 +101,7 @@ impl BusLoad {
             },
             peak_pct: self.peak_bits as f64 / (PEAK_WINDOW_S * rate) * 100.0,
             peak_at_s: self.peak_at_s,
+            arbitration: self.arbitration.clone(),
         }
     }
 }
@@ -107,13 +109,6 @@ impl BusLoad {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn an_eight_byte_frame_is_at_most_135_bits() {
-        // 111 bits unstuffed (47 + 64), up to 24 stuff bits in its 98 stuffable bits.
-        assert_eq!(frame_bits_worst(8), 135);
-        assert_eq!(frame_bits_worst(0), 55);
-    }
 
     #[test]
     fn a_steady_schedule_loads_the_bus_evenly() {

@@ -452,6 +452,12 @@ pub struct RunReport {
 
 impl<B: Can> Sim<B> {
     /// The report of the run so far, ended by `outcome`.
+    /// What the arbitration of a bus with the wire's time did (SIL with
+    /// `can.bit_timing`), for the report's bus load.
+    pub fn bus_arbitrated(&mut self, stats: firmware_bridge::can::membus::ArbitrationStats) {
+        self.bus.arbitrated(stats);
+    }
+
     pub fn report(&self, outcome: Outcome) -> RunReport {
         let (steering_can, throttle_can) = self.node_stats();
         RunReport {

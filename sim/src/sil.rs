@@ -84,7 +84,10 @@ pub fn run_sil_recorded(
     if !scenario.devices.all_simulated() {
         return Err(SilError::PhysicalDevice(format!("{:?}", scenario.devices)));
     }
-    let bus = MemBus::new();
+    let bus = match scenario.can.bit_timing {
+        true => MemBus::timed(golf_car_can::NETWORK.baudrate),
+        false => MemBus::new(),
+    };
     let mut sim = Sim::new(
         scenario.clone(),
         CanPort::new(bus.endpoint(), "sil"),
@@ -120,6 +123,8 @@ pub fn run_sil_recorded(
     let outcome = loop {
         let k = sim.next_tick();
         let now = k as f64 * dt;
+        // The wire's time (a bus with bit timing): what finished by now arrives.
+        bus.advance_to(now);
         let outcome = sim.step(now, 0.0)?;
         let out = sim.take_outputs();
         if let Some(r) = &mut rec {
@@ -152,6 +157,9 @@ pub fn run_sil_recorded(
             break o;
         }
     };
+    if let Some(stats) = bus.arbitration() {
+        sim.bus_arbitrated(stats);
+    }
     let trace = rt.trace(sim.time());
     Ok(SilRun {
         sim,

@@ -189,3 +189,52 @@ fn injected_frames_are_the_frames_the_controller_rejects() {
         );
     }
 }
+
+#[test]
+fn an_overloaded_bus_with_bit_timing_shows_as_late_frames_and_fails_unless_expected() {
+    let file = fault_files()
+        .into_iter()
+        .find(|f| f.ends_with("43-can-bus-overload-arbitrated.toml"))
+        .expect("the arbitrated overload scenario");
+    let mut sc = Scenario::load(&file).expect("scenario");
+    assert!(sc.can.bit_timing && sc.expect.bus_overloaded);
+    let cfg = ugv_sim::mission::controller_config(&sc, FollowerKind::Optimal);
+    let judge = |sc: &Scenario| {
+        let run = ugv_sim::sil::run_sil(sc.clone(), &cfg).expect("run");
+        ugv_sim::verdict::Verdict::judge(
+            ugv_sim::Mode::Sil,
+            sc,
+            run.sim.report(run.outcome),
+            Some(&run.trace),
+        )
+    };
+    let v = judge(&sc);
+    assert!(v.passed, "{:?}", v.failures);
+    let a = v
+        .report
+        .bus_load
+        .arbitration
+        .clone()
+        .expect("a bus with bit timing reports its arbitration");
+    assert!(a.late > 100 && a.max_wait_ms > 100.0, "{a:?}");
+    // The same schedule, not expected to overload the bus: the verdict says why.
+    sc.expect.bus_overloaded = false;
+    let v = judge(&sc);
+    assert!(
+        v.failures
+            .iter()
+            .any(|f| f.contains("could not carry the schedule")),
+        "{:?}",
+        v.failures
+    );
+    // The paper's schedule fits: nothing waits longer than a step.
+    let mut paper = Scenario::paper().expect("paper");
+    paper.can.bit_timing = true;
+    let v = judge(&paper);
+    let a = v.report.bus_load.arbitration.clone().expect("arbitration");
+    assert!(
+        v.passed && a.late == 0 && a.delivered > 1000,
+        "{a:?} {:?}",
+        v.failures
+    );
+}

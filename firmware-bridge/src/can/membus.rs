@@ -2,6 +2,13 @@
 //! `embedded_can::nb::Can`, a frame sent by one endpoint reaches every other one in
 //! order (like a raw CAN socket, not the sender itself), and frames are the same
 //! bytes the wire would carry.
+//!
+//! A bus made with [`MemBus::timed`] also has the wire's time: a sent frame waits for
+//! the bus, the lowest identifier among the frames waiting when the bus falls idle wins
+//! it (CAN's bitwise arbitration), and it occupies the bus for its worst-case bit time
+//! ([`frame_bits_worst`]) at the bit rate before the other nodes receive it. The run
+//! moves the bus's time on with [`MemBus::advance_to`]; an overloaded schedule then
+//! shows up as frames that waited ([`ArbitrationStats`]), as on a real bus.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -78,9 +85,134 @@ impl embedded_can::Error for MemBusError {
     }
 }
 
+/// Bits on the wire of a CAN 2.0 data frame of `dlc` data bytes with the most stuff
+/// bits it can need: SOF, the identifier field (11-bit: ID, RTR, IDE, r0; 29-bit: ID,
+/// SRR, IDE, RTR, r1, r0), DLC, data and CRC can take a stuff bit after every four,
+/// then the CRC delimiter, ACK, EOF and the interframe space (13 bits) are never
+/// stuffed. 135 bits for 8 bytes with an 11-bit identifier.
+pub fn frame_bits_worst(extended: bool, dlc: usize) -> u64 {
+    let header = if extended { 54 } else { 34 };
+    let stuffable = header + 8 * dlc.min(8) as u64;
+    stuffable + (stuffable - 1) / 4 + 13
+}
+
+/// A frame waited for the bus longer than this, seconds: it counts as late. 5 ms is
+/// eighteen 8-byte frames at 500 kbit/s, and one physics step of the simulator at its
+/// default 200 Hz, whose nodes send the frames of a step together: a burst of one
+/// step that the bus has not carried by the next means the schedule overloads it.
+pub const LATE_WAIT_S: f64 = 0.005;
+
+/// What the arbitration of a [`MemBus::timed`] bus did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ArbitrationStats {
+    pub bit_rate: u32,
+    /// Frames carried to the other nodes.
+    pub delivered: u64,
+    /// Of them, those that waited for the bus longer than [`LATE_WAIT_S`].
+    pub late: u64,
+    /// The longest wait from sending to winning the bus, milliseconds.
+    pub max_wait_ms: f64,
+    /// Frames still waiting for the bus at the last [`MemBus::advance_to`].
+    pub backlog: usize,
+}
+
+/// A frame waiting for the bus.
+#[derive(Debug)]
+struct Pending {
+    ready: f64,
+    /// Arbitration key: the lower wins (an 11-bit identifier beats a 29-bit one with
+    /// the same first 11 bits).
+    key: (u32, bool, u32),
+    order: u64,
+    from: usize,
+    frame: MemFrame,
+}
+
+/// The wire's time: the frames waiting, the one on the bus, and when it ends.
+#[derive(Debug)]
+struct Wire {
+    bit_rate: f64,
+    now: f64,
+    pending: Vec<Pending>,
+    on_bus: Option<(f64, Pending)>,
+    free_at: f64,
+    order: u64,
+    stats: ArbitrationStats,
+}
+
+fn arbitration_key(id: Id) -> (u32, bool, u32) {
+    match id {
+        Id::Standard(s) => (u32::from(s.as_raw()), false, 0),
+        Id::Extended(e) => (e.as_raw() >> 18, true, e.as_raw() & 0x3_ffff),
+    }
+}
+
 #[derive(Debug, Default)]
 struct Hub {
     inboxes: Vec<VecDeque<MemFrame>>,
+    wire: Option<Wire>,
+}
+
+impl Hub {
+    fn deliver(&mut self, from: usize, frame: &MemFrame) {
+        for (i, inbox) in self.inboxes.iter_mut().enumerate() {
+            if i != from {
+                inbox.push_back(frame.clone());
+            }
+        }
+    }
+
+    /// Run the wire up to time `t`: finish the frame on the bus, let the waiting
+    /// frames arbitrate whenever the bus falls idle.
+    fn advance_to(&mut self, t: f64) {
+        let Some(wire) = &mut self.wire else {
+            return;
+        };
+        wire.now = wire.now.max(t);
+        let mut done = Vec::new();
+        loop {
+            if let Some((end, _)) = &wire.on_bus {
+                if *end > t {
+                    break;
+                }
+                if let Some((end, p)) = wire.on_bus.take() {
+                    wire.free_at = end;
+                    done.push(p);
+                }
+            }
+            let Some(first) = wire.pending.iter().map(|p| p.ready).reduce(f64::min) else {
+                break;
+            };
+            let start = wire.free_at.max(first);
+            if start > t {
+                break;
+            }
+            // The earliest frame is ready by `start`, so there is a winner.
+            let Some(winner) = wire
+                .pending
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.ready <= start)
+                .min_by_key(|(_, p)| (p.key, p.order))
+                .map(|(i, _)| i)
+            else {
+                break;
+            };
+            let p = wire.pending.swap_remove(winner);
+            let wait = start - p.ready;
+            wire.stats.max_wait_ms = wire.stats.max_wait_ms.max(wait * 1e3);
+            if wait > LATE_WAIT_S {
+                wire.stats.late += 1;
+            }
+            let bits = frame_bits_worst(p.frame.is_extended(), p.frame.dlc);
+            wire.on_bus = Some((start + bits as f64 / wire.bit_rate, p));
+        }
+        wire.stats.delivered += done.len() as u64;
+        wire.stats.backlog = wire.pending.len() + usize::from(wire.on_bus.is_some());
+        for p in done {
+            self.deliver(p.from, &p.frame);
+        }
+    }
 }
 
 /// The bus: hands out endpoints.
@@ -90,8 +222,39 @@ pub struct MemBus {
 }
 
 impl MemBus {
+    /// A bus without time: a frame reaches the others as it is sent.
     pub fn new() -> MemBus {
         MemBus::default()
+    }
+
+    /// A bus with the wire's time at `bit_rate` bit/s, from time 0 (see the module).
+    pub fn timed(bit_rate: u32) -> MemBus {
+        let bus = MemBus::default();
+        lock(&bus.hub).wire = Some(Wire {
+            bit_rate: f64::from(bit_rate.max(1)),
+            now: 0.0,
+            pending: Vec::new(),
+            on_bus: None,
+            free_at: 0.0,
+            order: 0,
+            stats: ArbitrationStats {
+                bit_rate,
+                ..ArbitrationStats::default()
+            },
+        });
+        bus
+    }
+
+    /// Move a timed bus's time on to `t` seconds: the frames that finished by then
+    /// reach the other nodes; frames sent from now on are ready at `t`. Nothing on a
+    /// bus without time.
+    pub fn advance_to(&self, t: f64) {
+        lock(&self.hub).advance_to(t);
+    }
+
+    /// What the arbitration of a timed bus did (none for a bus without time).
+    pub fn arbitration(&self) -> Option<ArbitrationStats> {
+        lock(&self.hub).wire.as_ref().map(|w| w.stats.clone())
     }
 
     /// A new node on the bus.
@@ -118,10 +281,18 @@ impl embedded_can::nb::Can for MemEndpoint {
 
     fn transmit(&mut self, frame: &MemFrame) -> nb::Result<Option<MemFrame>, MemBusError> {
         let mut hub = lock(&self.hub);
-        for (i, inbox) in hub.inboxes.iter_mut().enumerate() {
-            if i != self.index {
-                inbox.push_back(frame.clone());
+        match &mut hub.wire {
+            Some(wire) => {
+                wire.order += 1;
+                wire.pending.push(Pending {
+                    ready: wire.now,
+                    key: arbitration_key(frame.id),
+                    order: wire.order,
+                    from: self.index,
+                    frame: frame.clone(),
+                });
             }
+            None => hub.deliver(self.index, frame),
         }
         Ok(None)
     }
@@ -181,5 +352,96 @@ mod tests {
         a.send_payload(SteeringCmd::ID, &data).expect("send");
         assert!(matches!(b.try_recv(), Some(Received::Message(_))));
         assert!(matches!(b.try_recv(), Some(Received::Rejected(_))));
+    }
+
+    fn frame(id: u16) -> MemFrame {
+        MemFrame::new(embedded_can::StandardId::new(id).expect("11-bit"), &[0; 8]).expect("frame")
+    }
+
+    fn ids(e: &mut MemEndpoint) -> Vec<u16> {
+        use embedded_can::nb::Can;
+        let mut out = Vec::new();
+        while let Ok(f) = e.receive() {
+            if let Id::Standard(s) = f.id() {
+                out.push(s.as_raw());
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn worst_case_bits_of_a_frame() {
+        assert_eq!(frame_bits_worst(false, 8), 135);
+        assert_eq!(frame_bits_worst(false, 0), 55);
+        assert_eq!(frame_bits_worst(true, 8), 160);
+    }
+
+    #[test]
+    fn a_timed_bus_delivers_after_the_bit_time_and_the_lowest_id_wins() {
+        use embedded_can::nb::Can;
+        let bus = MemBus::timed(500_000);
+        let (mut a, mut b, mut rx) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
+        // At t = 0 two frames wait: 0x300 from a, then 0x100 from b.
+        a.transmit(&frame(0x300)).expect("send");
+        b.transmit(&frame(0x100)).expect("send");
+        assert!(
+            ids(&mut rx).is_empty(),
+            "nothing arrives before the bus moves"
+        );
+        // One 8-byte frame takes 135 bits = 270 us at 500 kbit/s.
+        bus.advance_to(0.000_269);
+        assert!(
+            ids(&mut rx).is_empty(),
+            "the first frame is still on the bus"
+        );
+        bus.advance_to(0.000_270);
+        assert_eq!(
+            ids(&mut rx),
+            vec![0x100],
+            "the lower ID won the arbitration"
+        );
+        assert_eq!(ids(&mut a), vec![0x100], "the loser hears the winner");
+        assert!(ids(&mut b).is_empty(), "the sender does not hear itself");
+        bus.advance_to(0.000_541);
+        assert_eq!(ids(&mut rx), vec![0x300]);
+        let s = bus.arbitration().expect("timed");
+        assert_eq!((s.delivered, s.late, s.backlog), (2, 0, 0));
+        assert!((s.max_wait_ms - 0.27).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn an_overloaded_timed_bus_makes_the_low_priority_frames_late() {
+        use embedded_can::nb::Can;
+        let bus = MemBus::timed(500_000);
+        let (mut babbler, mut node, mut rx) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
+        // 10 ms steps; each step the babbler sends 50 frames of ID 0 (13.5 ms of bus
+        // time), the node one of ID 0x200.
+        for k in 0..20 {
+            bus.advance_to(f64::from(k) * 0.01);
+            for _ in 0..50 {
+                babbler.transmit(&frame(0)).expect("send");
+            }
+            node.transmit(&frame(0x200)).expect("send");
+        }
+        bus.advance_to(0.2);
+        let got = ids(&mut rx);
+        assert!(
+            !got.contains(&0x200),
+            "ID 0x200 never wins against the flood"
+        );
+        let s = bus.arbitration().expect("timed");
+        assert!(s.backlog > 20, "the bus falls behind: {s:?}");
+        assert!(s.late > 0 && s.max_wait_ms > 10.0, "{s:?}");
+    }
+
+    #[test]
+    fn a_bus_without_time_delivers_at_once() {
+        use embedded_can::nb::Can;
+        let bus = MemBus::new();
+        let (mut a, mut rx) = (bus.endpoint(), bus.endpoint());
+        a.transmit(&frame(0x123)).expect("send");
+        assert_eq!(ids(&mut rx), vec![0x123]);
+        bus.advance_to(1.0);
+        assert_eq!(bus.arbitration(), None);
     }
 }

@@ -199,6 +199,10 @@ pub struct CanConfig {
     pub interface: String,
     /// How long after the last FAULT_REPORT a fault counts as cleared, ms.
     pub fault_clear_ms: u32,
+    /// SIL: give the memory bus the wire's time at the DBC's bit rate, so frames wait
+    /// for the bus and win it by ID and an overloaded schedule shows up as late frames
+    /// (the verdict's `bus_load.arbitration`). Off: a frame arrives as it is sent.
+    pub bit_timing: bool,
 }
 
 impl Default for CanConfig {
@@ -206,6 +210,7 @@ impl Default for CanConfig {
         CanConfig {
             interface: "vcan0".to_owned(),
             fault_clear_ms: 250,
+            bit_timing: false,
         }
     }
 }
