@@ -8,20 +8,7 @@ use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, within};
 
 /// Why a configuration was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    #[error("{file}: {source}")]
-    Read {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{file}: {message}")]
-    Parse { file: String, message: String },
-    /// A well-formed value that makes no sense, with the file and line it is on.
-    #[error(transparent)]
-    Invalid(#[from] ugv_fields::LocatedError),
-}
+pub type ConfigError = ugv_fields::FileError;
 
 pub use firmware_bridge::geodesy::Datum;
 
@@ -233,19 +220,13 @@ pub struct ControllerConfig {
 impl ControllerConfig {
     /// Parse and check TOML text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<ControllerConfig, ConfigError> {
-        let cfg: ControllerConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string().trim_end().to_owned(),
-        })?;
+        let cfg: ControllerConfig = ugv_fields::parse_toml(text, file)?;
         cfg.validate().map_err(|e| e.located(text, file))?;
         Ok(cfg)
     }
 
     pub fn load(path: &Path) -> Result<ControllerConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.display().to_string(),
-            source,
-        })?;
+        let text = ugv_fields::read_file(path)?;
         ControllerConfig::from_toml(&text, &path.display().to_string())
     }
 

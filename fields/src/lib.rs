@@ -7,6 +7,9 @@
 //! The checks ([`finite`], [`positive`], [`within`], ...) are the range checks every
 //! loader shares. Coordinates and sizes also have to survive the narrowing to `f32`
 //! that physics and wire formats do, so [`PLAUSIBLE_COORDINATE`] bounds positions.
+//!
+//! [`read_file`] and [`parse_toml`] read such a file, with a [`FileError`] that names
+//! it whatever went wrong.
 
 use std::borrow::Cow;
 use std::fmt;
@@ -123,6 +126,41 @@ impl fmt::Display for FieldPath {
         }
         Ok(())
     }
+}
+
+/// Why a TOML file was refused: it could not be read, it is not the TOML its type
+/// reads, or a value in it makes no sense.
+#[derive(Debug, thiserror::Error)]
+pub enum FileError {
+    #[error("{file}: {source}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Syntax errors and unknown or mistyped fields (the TOML error names line and
+    /// column).
+    #[error("{file}: {message}")]
+    Parse { file: String, message: String },
+    /// A well-formed value that makes no sense, with the file and line it is on.
+    #[error(transparent)]
+    Invalid(#[from] LocatedError),
+}
+
+/// The text of the file at `path`.
+pub fn read_file(path: &std::path::Path) -> Result<String, FileError> {
+    std::fs::read_to_string(path).map_err(|source| FileError::Read {
+        file: path.display().to_string(),
+        source,
+    })
+}
+
+/// TOML `text` of `file` as a `T`.
+pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Result<T, FileError> {
+    toml::from_str(text).map_err(|e| FileError::Parse {
+        file: file.to_owned(),
+        message: e.to_string().trim_end().to_owned(),
+    })
 }
 
 /// A field that makes no sense, and why.

@@ -20,9 +20,9 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{FieldError, FieldPath};
+use ugv_fields::{FieldError, FieldPath, parse_toml, read_file};
 
-use crate::scenario::fields::{ScenarioError, parse, read};
+use crate::scenario::fields::ScenarioError;
 
 /// An actuator ECU: played by the simulator on its bus, or a physical ECU on a
 /// physical SocketCAN interface that the gateway joins to the simulator's bus. With a
@@ -237,8 +237,8 @@ impl DeviceMap {
     /// Read a bench file (`[devices]` alone), checked against the simulator's bus.
     pub fn load(path: &Path, sim_can: &str) -> Result<DeviceMap, ScenarioError> {
         let file = path.display().to_string();
-        let text = read(path)?;
-        let bench: BenchFile = parse(&text, &file)?;
+        let text = read_file(path)?;
+        let bench: BenchFile = parse_toml(&text, &file)?;
         bench
             .devices
             .validate(sim_can)

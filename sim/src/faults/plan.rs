@@ -6,10 +6,10 @@
 //! file, line and field.
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{FieldError, FieldPath, positive_up_to, within};
+use ugv_fields::{FieldError, FieldPath, parse_toml, positive_up_to, read_file, within};
 
 use crate::devices::gps::FixKind;
-use crate::scenario::fields::{ScenarioError, parse, read};
+use crate::scenario::fields::ScenarioError;
 
 /// Most faults in one plan.
 pub const MAX_FAULTS: usize = 1_000;
@@ -741,7 +741,7 @@ pub struct PlanFile {
 impl PlanFile {
     /// Parse and validate TOML text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, ScenarioError> {
-        let plan: PlanFile = parse(text, file)?;
+        let plan: PlanFile = parse_toml(text, file)?;
         validate_plan(&plan.faults, &plan.expect.clone().unwrap_or_default())
             .map_err(|e| e.located(text, file))?;
         Ok(plan)
@@ -749,7 +749,7 @@ impl PlanFile {
 
     /// Read a fault plan file (`ugv-sim run --faults FILE`).
     pub fn load(path: &std::path::Path) -> Result<PlanFile, ScenarioError> {
-        let text = read(path)?;
+        let text = read_file(path)?;
         PlanFile::from_toml(&text, &path.display().to_string())
     }
 }

@@ -168,11 +168,6 @@ impl Endpoints {
             _isolated: isolated,
         })
     }
-
-    /// Where the wires are.
-    pub fn map(&self) -> &WireMap {
-        &self.wires.map
-    }
 }
 
 /// Step in real time on absolute deadlines, the sensors' output on the wires, until

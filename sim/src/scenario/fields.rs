@@ -1,45 +1,13 @@
-//! Reading scenario-like TOML files (scenarios, bench files, fault plans) with errors
-//! that name the file, the line and the field, and the field checks of a scenario's
-//! geometry that the shared toolkit (`ugv_fields`) does not know.
+//! The error of scenario-like TOML files (scenarios, bench files, fault plans), and the
+//! field checks of a scenario's geometry that the shared toolkit (`ugv_fields`) does
+//! not know.
 
-use ugv_fields::{FieldError, FieldPath, LocatedError, coordinate, positive_up_to, within};
+use ugv_fields::{FieldError, FieldPath, coordinate, positive_up_to, within};
 
 use super::schema::Motion;
 
-/// Why a scenario was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum ScenarioError {
-    #[error("{file}: {source}")]
-    Read {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
-    /// Syntax errors and unknown or mistyped fields (the TOML error names line and column).
-    #[error("{file}: {message}")]
-    Parse { file: String, message: String },
-    /// A well-formed value that makes no sense (a negative radius, a goal inside a
-    /// wall...), with the file and line it is on.
-    #[error(transparent)]
-    Invalid(#[from] LocatedError),
-}
-
-/// Parse TOML `text` of `file` into `T`, its syntax and unknown or mistyped fields
-/// refused with the TOML error (which names line and column).
-pub fn parse<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Result<T, ScenarioError> {
-    toml::from_str(text).map_err(|e| ScenarioError::Parse {
-        file: file.to_owned(),
-        message: e.to_string().trim_end().to_owned(),
-    })
-}
-
-/// Read the text of `path`.
-pub fn read(path: &std::path::Path) -> Result<String, ScenarioError> {
-    std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
-        file: path.display().to_string(),
-        source,
-    })
-}
+/// Why a scenario, a bench file or a fault plan was refused.
+pub type ScenarioError = ugv_fields::FileError;
 
 pub(super) fn check_points(
     path: &FieldPath,

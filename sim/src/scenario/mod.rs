@@ -127,7 +127,7 @@ impl Scenario {
 
     /// Parse and validate TOML text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<Scenario, ScenarioError> {
-        let scenario: Scenario = fields::parse(text, file)?;
+        let scenario: Scenario = ugv_fields::parse_toml(text, file)?;
         scenario.validate().map_err(|e| e.located(text, file))?;
         Ok(scenario)
     }
@@ -163,7 +163,7 @@ impl Scenario {
 
     /// Read a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = fields::read(path)?;
+        let text = ugv_fields::read_file(path)?;
         Scenario::from_toml(&text, &path.display().to_string())
     }
 

@@ -161,10 +161,7 @@ impl Plan {
         let mut groups = Vec::with_capacity(files.len() * grid.len());
         for f in files {
             let name = f.display().to_string();
-            let text = std::fs::read_to_string(f).map_err(|source| ScenarioError::Read {
-                file: name.clone(),
-                source,
-            });
+            let text = ugv_fields::read_file(f);
             // The file as written must load; then every setting must be accepted.
             let base = text
                 .as_ref()
