@@ -12,8 +12,9 @@ use crate::devices::gps::{GpsDevice, GpsEpoch, GpsError};
 use crate::devices::laser::{LaserDevice, LaserDeviceError};
 use crate::devices::map::EcuDevice;
 use crate::ecu::EcuKind;
-use crate::ecu::station::Station;
+use crate::ecu::station::{NodeStats, Station};
 use crate::faults::{FaultRecord, Injector, Node, ProcessFault};
+use crate::measure::Jitter;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 use crate::world::World;
@@ -62,9 +63,6 @@ pub enum Outcome {
         reason: String,
     },
 }
-
-use crate::ecu::station::NodeStats;
-use crate::measure::Jitter;
 
 /// What the terminal shows and the verdict is built from.
 #[derive(Clone, Debug, Serialize)]

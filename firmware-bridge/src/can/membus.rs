@@ -153,23 +153,24 @@ struct Hub {
     wire: Option<Wire>,
 }
 
-impl Hub {
-    fn deliver(&mut self, from: usize, frame: &MemFrame) {
-        for (i, inbox) in self.inboxes.iter_mut().enumerate() {
-            if i != from {
-                inbox.push_back(frame.clone());
-            }
+/// `frame` from node `from` into every other node's inbox.
+fn deliver(inboxes: &mut [VecDeque<MemFrame>], from: usize, frame: &MemFrame) {
+    for (i, inbox) in inboxes.iter_mut().enumerate() {
+        if i != from {
+            inbox.push_back(frame.clone());
         }
     }
+}
 
+impl Hub {
     /// Run the wire up to time `t`: finish the frame on the bus, let the waiting
     /// frames arbitrate whenever the bus falls idle.
     fn advance_to(&mut self, t: f64) {
-        let Some(wire) = &mut self.wire else {
+        let Hub { inboxes, wire } = self;
+        let Some(wire) = wire else {
             return;
         };
         wire.now = wire.now.max(t);
-        let mut done = Vec::new();
         loop {
             if let Some((end, _)) = &wire.on_bus {
                 if *end > t {
@@ -177,7 +178,8 @@ impl Hub {
                 }
                 if let Some((end, p)) = wire.on_bus.take() {
                     wire.free_at = end;
-                    done.push(p);
+                    wire.stats.delivered += 1;
+                    deliver(inboxes, p.from, &p.frame);
                 }
             }
             let Some(first) = wire.pending.iter().map(|p| p.ready).reduce(f64::min) else {
@@ -207,11 +209,7 @@ impl Hub {
             let bits = frame_bits_worst(p.frame.is_extended(), p.frame.dlc);
             wire.on_bus = Some((start + bits as f64 / wire.bit_rate, p));
         }
-        wire.stats.delivered += done.len() as u64;
         wire.stats.backlog = wire.pending.len() + usize::from(wire.on_bus.is_some());
-        for p in done {
-            self.deliver(p.from, &p.frame);
-        }
     }
 }
 
@@ -292,7 +290,7 @@ impl embedded_can::nb::Can for MemEndpoint {
                     frame: frame.clone(),
                 });
             }
-            None => hub.deliver(self.index, frame),
+            None => deliver(&mut hub.inboxes, self.index, frame),
         }
         Ok(None)
     }
