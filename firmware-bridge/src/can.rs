@@ -6,7 +6,9 @@
 //! ones) in HIL, or the in-memory bus of [`membus`] in SIL. The controller never knows
 //! which.
 
+pub mod arbiter;
 pub mod membus;
+pub mod paced;
 pub mod timed;
 
 use std::io;
@@ -224,9 +226,17 @@ fn open_error(iface: &str, source: io::Error) -> BridgeError {
 
 impl CanPort<timed::TimedSocket> {
     /// Open a raw CAN socket on `iface` whose frames are handed out by `horizon`
-    /// (see [`timed`]).
-    pub fn open_timed(iface: &str, horizon: timed::Horizon) -> Result<Self, BridgeError> {
+    /// (see [`timed`]), sending through `pacer` when given (see [`paced`]).
+    pub fn open_timed(
+        iface: &str,
+        horizon: timed::Horizon,
+        pacer: Option<&paced::Pacer>,
+    ) -> Result<Self, BridgeError> {
         let socket = timed::TimedSocket::open(iface, horizon).map_err(|e| open_error(iface, e))?;
+        let socket = match pacer {
+            Some(p) => socket.paced(p),
+            None => socket,
+        };
         Ok(CanPort::new(socket, iface))
     }
 }

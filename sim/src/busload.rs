@@ -6,7 +6,7 @@
 
 use std::collections::VecDeque;
 
-use firmware_bridge::can::membus::{ArbitrationStats, frame_bits_worst};
+use firmware_bridge::can::arbiter::{ArbitrationStats, frame_bits_worst};
 use serde::Serialize;
 
 /// The window the peak load is taken over, seconds.
@@ -26,7 +26,8 @@ pub struct BusLoadReport {
     pub peak_pct: f64,
     /// When that window ended, simulated seconds.
     pub peak_at_s: f64,
-    /// The arbitration of a bus with the wire's time (SIL with `can.bit_timing`).
+    /// The arbitration of a bus with the wire's time (`can.bit_timing`: SIL's memory
+    /// bus, or the simulator's paced transmissions in HIL).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub arbitration: Option<ArbitrationStats>,
 }

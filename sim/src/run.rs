@@ -452,7 +452,7 @@ impl<B: Can> Sim<B> {
     /// The report of the run so far, ended by `outcome`.
     /// What the arbitration of a bus with the wire's time did (SIL with
     /// `can.bit_timing`), for the report's bus load.
-    pub fn bus_arbitrated(&mut self, stats: firmware_bridge::can::membus::ArbitrationStats) {
+    pub fn bus_arbitrated(&mut self, stats: firmware_bridge::can::arbiter::ArbitrationStats) {
         self.bus.arbitrated(stats);
     }
 

@@ -130,8 +130,9 @@ impl Verdict {
             report.safe_state.as_ref().map(|s| s.noticed_s),
         ));
         let load = &report.bus_load;
-        // With the wire's time (SIL, can.bit_timing) the bus carries no more than its
-        // bit rate: an overload shows as frames that waited for it.
+        // With the wire's time (can.bit_timing: SIL's memory bus, HIL's paced sends)
+        // the bus carries no more than its bit rate: an overload shows as frames that
+        // waited for it.
         let late = load.arbitration.as_ref().filter(|a| a.late > 0);
         let overloaded = load.peak_pct > 100.0 || late.is_some();
         if overloaded != scenario.expect.bus_overloaded {
@@ -139,7 +140,7 @@ impl Verdict {
                 format!(
                     "the bus could not carry the schedule: {} frames waited over {:.0} ms for it (longest {:.1} ms), {} still waiting at the end",
                     a.late,
-                    firmware_bridge::can::membus::LATE_WAIT_S * 1e3,
+                    firmware_bridge::can::arbiter::LATE_WAIT_S * 1e3,
                     a.max_wait_ms,
                     a.backlog
                 )

@@ -3,17 +3,18 @@
 //! order (like a raw CAN socket, not the sender itself), and frames are the same
 //! bytes the wire would carry.
 //!
-//! A bus made with [`MemBus::timed`] also has the wire's time: a sent frame waits for
-//! the bus, the lowest identifier among the frames waiting when the bus falls idle wins
-//! it (CAN's bitwise arbitration), and it occupies the bus for its worst-case bit time
-//! ([`frame_bits_worst`]) at the bit rate before the other nodes receive it. The run
-//! moves the bus's time on with [`MemBus::advance_to`]; an overloaded schedule then
-//! shows up as frames that waited ([`ArbitrationStats`]), as on a real bus.
+//! A bus made with [`MemBus::timed`] also has the wire's time ([`super::arbiter`]): a
+//! sent frame waits for the bus, the lowest identifier wins it, and the other nodes
+//! receive it after its worst-case bit time. The run moves the bus's time on with
+//! [`MemBus::advance_to`]; an overloaded schedule then shows up as frames that waited
+//! ([`ArbitrationStats`]), as on a real bus.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 use embedded_can::{ErrorKind, Frame, Id};
+
+use super::arbiter::{Arbiter, ArbitrationStats, Release};
 
 use crate::sync::lock;
 
@@ -85,66 +86,12 @@ impl embedded_can::Error for MemBusError {
     }
 }
 
-/// Bits on the wire of a CAN 2.0 data frame of `dlc` data bytes with the most stuff
-/// bits it can need: SOF, the identifier field (11-bit: ID, RTR, IDE, r0; 29-bit: ID,
-/// SRR, IDE, RTR, r1, r0), DLC, data and CRC can take a stuff bit after every four,
-/// then the CRC delimiter, ACK, EOF and the interframe space (13 bits) are never
-/// stuffed. 135 bits for 8 bytes with an 11-bit identifier.
-pub fn frame_bits_worst(extended: bool, dlc: usize) -> u64 {
-    let header = if extended { 54 } else { 34 };
-    let stuffable = header + 8 * dlc.min(8) as u64;
-    stuffable + (stuffable - 1) / 4 + 13
-}
-
-/// A frame waited for the bus longer than this, seconds: it counts as late. 5 ms is
-/// eighteen 8-byte frames at 500 kbit/s, and one physics step of the simulator at its
-/// default 200 Hz, whose nodes send the frames of a step together: a burst of one
-/// step that the bus has not carried by the next means the schedule overloads it.
-pub const LATE_WAIT_S: f64 = 0.005;
-
-/// What the arbitration of a [`MemBus::timed`] bus did.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
-pub struct ArbitrationStats {
-    pub bit_rate: u32,
-    /// Frames carried to the other nodes.
-    pub delivered: u64,
-    /// Of them, those that waited for the bus longer than [`LATE_WAIT_S`].
-    pub late: u64,
-    /// The longest wait from sending to winning the bus, milliseconds.
-    pub max_wait_ms: f64,
-    /// Frames still waiting for the bus at the last [`MemBus::advance_to`].
-    pub backlog: usize,
-}
-
-/// A frame waiting for the bus.
-#[derive(Debug)]
-struct Pending {
-    ready: f64,
-    /// Arbitration key: the lower wins (an 11-bit identifier beats a 29-bit one with
-    /// the same first 11 bits).
-    key: (u32, bool, u32),
-    order: u64,
-    from: usize,
-    frame: MemFrame,
-}
-
-/// The wire's time: the frames waiting, the one on the bus, and when it ends.
+/// The wire's time of a timed bus: its arbitration, and the time it has reached
+/// (frames sent from then on are ready then).
 #[derive(Debug)]
 struct Wire {
-    bit_rate: f64,
     now: f64,
-    pending: Vec<Pending>,
-    on_bus: Option<(f64, Pending)>,
-    free_at: f64,
-    order: u64,
-    stats: ArbitrationStats,
-}
-
-fn arbitration_key(id: Id) -> (u32, bool, u32) {
-    match id {
-        Id::Standard(s) => (u32::from(s.as_raw()), false, 0),
-        Id::Extended(e) => (e.as_raw() >> 18, true, e.as_raw() & 0x3_ffff),
-    }
+    arbiter: Arbiter<MemFrame>,
 }
 
 #[derive(Debug, Default)]
@@ -163,53 +110,15 @@ fn deliver(inboxes: &mut [VecDeque<MemFrame>], from: usize, frame: &MemFrame) {
 }
 
 impl Hub {
-    /// Run the wire up to time `t`: finish the frame on the bus, let the waiting
-    /// frames arbitrate whenever the bus falls idle.
+    /// Run the wire up to time `t`: the frames that finished by then reach the
+    /// other nodes.
     fn advance_to(&mut self, t: f64) {
         let Hub { inboxes, wire } = self;
-        let Some(wire) = wire else {
-            return;
-        };
-        wire.now = wire.now.max(t);
-        loop {
-            if let Some((end, _)) = &wire.on_bus {
-                if *end > t {
-                    break;
-                }
-                if let Some((end, p)) = wire.on_bus.take() {
-                    wire.free_at = end;
-                    wire.stats.delivered += 1;
-                    deliver(inboxes, p.from, &p.frame);
-                }
-            }
-            let Some(first) = wire.pending.iter().map(|p| p.ready).reduce(f64::min) else {
-                break;
-            };
-            let start = wire.free_at.max(first);
-            if start > t {
-                break;
-            }
-            // The earliest frame is ready by `start`, so there is a winner.
-            let Some(winner) = wire
-                .pending
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| p.ready <= start)
-                .min_by_key(|(_, p)| (p.key, p.order))
-                .map(|(i, _)| i)
-            else {
-                break;
-            };
-            let p = wire.pending.swap_remove(winner);
-            let wait = start - p.ready;
-            wire.stats.max_wait_ms = wire.stats.max_wait_ms.max(wait * 1e3);
-            if wait > LATE_WAIT_S {
-                wire.stats.late += 1;
-            }
-            let bits = frame_bits_worst(p.frame.is_extended(), p.frame.dlc);
-            wire.on_bus = Some((start + bits as f64 / wire.bit_rate, p));
+        if let Some(wire) = wire {
+            wire.now = wire.now.max(t);
+            wire.arbiter
+                .advance_to(t, |from, frame| deliver(inboxes, from, &frame));
         }
-        wire.stats.backlog = wire.pending.len() + usize::from(wire.on_bus.is_some());
     }
 }
 
@@ -229,16 +138,8 @@ impl MemBus {
     pub fn timed(bit_rate: u32) -> MemBus {
         let bus = MemBus::default();
         lock(&bus.hub).wire = Some(Wire {
-            bit_rate: f64::from(bit_rate.max(1)),
             now: 0.0,
-            pending: Vec::new(),
-            on_bus: None,
-            free_at: 0.0,
-            order: 0,
-            stats: ArbitrationStats {
-                bit_rate,
-                ..ArbitrationStats::default()
-            },
+            arbiter: Arbiter::new(bit_rate, Release::AtEnd),
         });
         bus
     }
@@ -252,7 +153,7 @@ impl MemBus {
 
     /// What the arbitration of a timed bus did (none for a bus without time).
     pub fn arbitration(&self) -> Option<ArbitrationStats> {
-        lock(&self.hub).wire.as_ref().map(|w| w.stats.clone())
+        lock(&self.hub).wire.as_ref().map(|w| w.arbiter.stats())
     }
 
     /// A new node on the bus.
@@ -280,16 +181,7 @@ impl embedded_can::nb::Can for MemEndpoint {
     fn transmit(&mut self, frame: &MemFrame) -> nb::Result<Option<MemFrame>, MemBusError> {
         let mut hub = lock(&self.hub);
         match &mut hub.wire {
-            Some(wire) => {
-                wire.order += 1;
-                wire.pending.push(Pending {
-                    ready: wire.now,
-                    key: arbitration_key(frame.id),
-                    order: wire.order,
-                    from: self.index,
-                    frame: frame.clone(),
-                });
-            }
+            Some(wire) => wire.arbiter.submit(wire.now, self.index, frame.clone()),
             None => deliver(&mut hub.inboxes, self.index, frame),
         }
         Ok(None)
@@ -365,13 +257,6 @@ mod tests {
             }
         }
         out
-    }
-
-    #[test]
-    fn worst_case_bits_of_a_frame() {
-        assert_eq!(frame_bits_worst(false, 8), 135);
-        assert_eq!(frame_bits_worst(false, 0), 55);
-        assert_eq!(frame_bits_worst(true, 8), 160);
     }
 
     #[test]

@@ -17,6 +17,7 @@ use std::time::SystemTime;
 
 use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
 
+use super::paced::Pacer;
 use crate::clock::unix_ns;
 
 /// The time up to which the timed sockets sharing it hand out frames, set by the loop
@@ -55,13 +56,16 @@ impl Horizon {
     }
 }
 
-/// A raw CAN socket read through a [`Horizon`]; it sends like any socket.
+/// A raw CAN socket read through a [`Horizon`]; it sends like any socket, or paced at
+/// the bus's bit rate ([`TimedSocket::paced`]).
 #[derive(Debug)]
 pub struct TimedSocket {
     socket: CanSocket,
     horizon: Horizon,
     /// The first frame that arrived after the horizon, with its receive time (ns).
     held: Option<(CanFrame, u64)>,
+    /// The pacing this socket's frames go through, and its node number there.
+    pacer: Option<(Pacer, usize)>,
 }
 
 impl TimedSocket {
@@ -74,7 +78,37 @@ impl TimedSocket {
             socket,
             horizon,
             held: None,
+            pacer: None,
         })
+    }
+
+    /// Send through `pacer` from now on (see [`super::paced`]): a frame goes onto
+    /// the interface when it wins the bus. The first socket paced by a pacer also
+    /// reports the other nodes' frames to it, so the bus time they take is counted
+    /// once.
+    pub fn paced(mut self, pacer: &Pacer) -> TimedSocket {
+        self.pacer = Some((pacer.clone(), pacer.node()));
+        self
+    }
+
+    /// Put the frames whose turn has come onto the interface; those the kernel cannot
+    /// take now wait for the next call.
+    fn flush(&mut self) -> nb::Result<(), socketcan::Error> {
+        let Some((pacer, node)) = &self.pacer else {
+            return Ok(());
+        };
+        let mut frames = pacer.take(*node).into_iter();
+        while let Some(frame) = frames.next() {
+            match embedded_can::nb::Can::transmit(&mut self.socket, &frame) {
+                Ok(_) => {}
+                Err(nb::Error::WouldBlock) => {
+                    pacer.put_back(*node, std::iter::once(frame).chain(frames));
+                    return Ok(());
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
     }
 
     fn hand_out(frame: CanFrame) -> nb::Result<CanFrame, socketcan::Error> {
@@ -90,6 +124,7 @@ impl embedded_can::nb::Can for TimedSocket {
     type Error = socketcan::Error;
 
     fn receive(&mut self) -> nb::Result<CanFrame, socketcan::Error> {
+        self.flush()?;
         let (frame, at) = match self.held.take() {
             Some(held) => held,
             None => match self.socket.read_frame_with_timestamp() {
@@ -105,11 +140,21 @@ impl embedded_can::nb::Can for TimedSocket {
             self.held = Some((frame, at));
             return Err(nb::Error::WouldBlock);
         }
+        if let Some((pacer, 0)) = &self.pacer {
+            pacer.seen(&frame, at);
+        }
         TimedSocket::hand_out(frame)
     }
 
     fn transmit(&mut self, frame: &CanFrame) -> nb::Result<Option<CanFrame>, socketcan::Error> {
-        embedded_can::nb::Can::transmit(&mut self.socket, frame)
+        match &self.pacer {
+            Some((pacer, node)) => {
+                pacer.submit(*node, *frame);
+                self.flush()?;
+                Ok(None)
+            }
+            None => embedded_can::nb::Can::transmit(&mut self.socket, frame),
+        }
     }
 }
 

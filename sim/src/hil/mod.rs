@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use firmware_bridge::can::paced::Pacer;
 use firmware_bridge::can::timed::{Horizon, TimedSocket};
 use firmware_bridge::clock::{Clock, WallClock};
 use firmware_bridge::gateway::GatewayError;
@@ -95,12 +96,15 @@ pub enum HilError {
 }
 
 /// The simulator's endpoints of one HIL run, opened by the binary and handed to
-/// [`run_scenario`]: the ECUs' CAN sockets (timed, sharing one horizon), the
-/// recorder's tap on the same bus, and the wires. With `--isolate`, all of them live
+/// [`run_scenario`]: the ECUs' CAN sockets (timed, sharing one horizon, and paced at
+/// the bit rate when the scenario asks: `can.bit_timing`), the recorder's tap on the
+/// same bus, and the wires. With `--isolate`, all of them live
 /// in the run's private network namespace, which lasts as long as they do.
 pub struct Endpoints {
     steering: CanPort<TimedSocket>,
     throttle: CanPort<TimedSocket>,
+    /// The pacing of the ECUs' transmissions (`can.bit_timing`).
+    pacer: Option<Pacer>,
     tap: Option<SocketTap>,
     wires: Wires,
     /// Dropped last: the namespace the sockets were opened in.
@@ -142,10 +146,18 @@ impl Endpoints {
         };
         let iface = sc.can.interface.clone();
         let horizon = Horizon::new();
+        // The simulator sends once per physics step: a frame whose turn on the bus
+        // comes before the next step goes at once.
+        let pacer = sc
+            .can
+            .bit_timing
+            .then(|| Pacer::new(golf_car_can::NETWORK.baudrate, 1.0 / sc.sim.physics_hz));
         let open = |what: &str| {
-            CanPort::open_timed(&iface, horizon.clone()).map_err(|source| HilError::Can {
-                iface: format!("{iface} ({what})"),
-                source,
+            CanPort::open_timed(&iface, horizon.clone(), pacer.as_ref()).map_err(|source| {
+                HilError::Can {
+                    iface: format!("{iface} ({what})"),
+                    source,
+                }
             })
         };
         let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
@@ -163,6 +175,7 @@ impl Endpoints {
         Ok(Endpoints {
             steering,
             throttle,
+            pacer,
             tap,
             wires,
             _isolated: isolated,
@@ -292,6 +305,7 @@ pub fn run_scenario(
     let Endpoints {
         steering,
         throttle,
+        pacer,
         tap,
         mut wires,
         _isolated,
@@ -417,6 +431,9 @@ pub fn run_scenario(
             })
     });
     let (outcome, started_ns) = run?;
+    if let Some(p) = &pacer {
+        sim.bus_arbitrated(p.stats());
+    }
     let (lines, last) = wires.gps_input();
     if lines > 0 {
         log(&format!(

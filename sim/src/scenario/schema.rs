@@ -199,9 +199,12 @@ pub struct CanConfig {
     pub interface: String,
     /// How long after the last FAULT_REPORT a fault counts as cleared, ms.
     pub fault_clear_ms: u32,
-    /// SIL: give the memory bus the wire's time at the DBC's bit rate, so frames wait
-    /// for the bus and win it by ID and an overloaded schedule shows up as late frames
-    /// (the verdict's `bus_load.arbitration`). Off: a frame arrives as it is sent.
+    /// Give the bus the wire's time at the DBC's bit rate, so frames wait for the bus
+    /// and win it by ID and an overloaded schedule shows up as late frames (the
+    /// verdict's `bus_load.arbitration`): in SIL the memory bus arbitrates every
+    /// node's frames; in HIL the simulator's own transmissions are paced onto the
+    /// interface, the other nodes' frames seen there taking their bit time. Off: a
+    /// frame arrives as it is sent.
     pub bit_timing: bool,
 }
 

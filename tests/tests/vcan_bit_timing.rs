@@ -1,0 +1,152 @@
+//! The simulator's transmissions paced at the bus's bit rate on vcan (issue 16, item
+//! 4): vcan carries any schedule instantly, so the simulator's paced sockets put each
+//! frame on the interface when it wins the bus, and an overloaded schedule shows up as
+//! frames that waited, as on a 500 kbit/s bus.
+//!
+//! Needs vcan (fails loudly without it); the README's test command runs it natively
+//! or inside `vcan-setup vm`.
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail, ensure};
+use embedded_can::nb::Can;
+use embedded_can::{Frame, Id, StandardId};
+use firmware_bridge::can::paced::Pacer;
+use firmware_bridge::can::timed::{Horizon, TimedSocket};
+use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
+use ugv_e2e_tests::{TestVcan, workspace_bin};
+
+fn frame(id: u16) -> Result<CanFrame> {
+    let id = StandardId::new(id).context("11-bit id")?;
+    CanFrame::new(id, &[0x55; 8]).context("frame")
+}
+
+fn raw(f: &CanFrame) -> u32 {
+    match f.id() {
+        Id::Standard(s) => u32::from(s.as_raw()),
+        Id::Extended(e) => e.as_raw(),
+    }
+}
+
+/// Two paced nodes and a foreign sender on one vcan: the frames go onto the interface
+/// one bit time apart, the lower identifier first, and the flood's tail waits.
+#[test]
+fn paced_sockets_put_frames_on_vcan_at_the_bit_rate_lowest_id_first() -> Result<()> {
+    let vcan = TestVcan::new("paced")?;
+    let pacer = Pacer::new(500_000, 0.0);
+    let horizon = Horizon::new();
+    let mut a = TimedSocket::open(&vcan.name, horizon.clone())?.paced(&pacer);
+    let mut b = TimedSocket::open(&vcan.name, horizon)?.paced(&pacer);
+    let listener = CanSocket::open(&vcan.name)?;
+    listener.set_nonblocking(true)?;
+    listener.set_recv_timestamp(true)?;
+    let foreign = CanSocket::open(&vcan.name)?;
+
+    // A frame of a node outside the pacing, seen by the first paced socket.
+    foreign.write_frame(&frame(0x050)?)?;
+    let seen = loop {
+        match a.receive() {
+            Ok(f) => break f,
+            Err(nb::Error::WouldBlock) => std::thread::sleep(Duration::from_millis(1)),
+            Err(nb::Error::Other(e)) => bail!("receive: {e}"),
+        }
+    };
+    ensure!(raw(&seen) == 0x050);
+    ensure!(pacer.stats().foreign == 1, "{:?}", pacer.stats());
+
+    // 200 frames of 0x300 from a (54 ms of bus time at 500 kbit/s), then one 0x100
+    // from b: the first 0x300 is on the bus, 0x100 wins the next arbitration.
+    for _ in 0..200 {
+        a.transmit(&frame(0x300)?)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    }
+    b.transmit(&frame(0x100)?)
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let started = Instant::now();
+    let mut got: Vec<(u32, std::time::SystemTime)> = Vec::new();
+    while got.len() < 202 {
+        // The nodes' loops come back: each call puts out the frames whose turn came.
+        let _ = a.receive();
+        let _ = b.receive();
+        while let Ok((f, at)) = listener.read_frame_with_timestamp() {
+            got.push((raw(&f), at));
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            bail!(
+                "only {} of 202 frames within 30 s: {:?}",
+                got.len(),
+                pacer.stats()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let ids: Vec<u32> = got.iter().map(|(id, _)| *id).collect();
+    ensure!(ids[0] == 0x050 && ids[1] == 0x300, "{:x?}", &ids[..4]);
+    // 0x100, sent after the whole flood, wins the bus from the 0x300s still waiting
+    // (those that won it while the flood was being queued went before it).
+    let at = ids
+        .iter()
+        .position(|id| *id == 0x100)
+        .context("0x100 never came")?;
+    ensure!(at < 100, "0x100 came {at}th: {:x?}", &ids[..at + 1]);
+    ensure!(ids.iter().filter(|id| **id == 0x300).count() == 200);
+    // Paced, not at once: the last frame left no earlier than 200 bit times (of 135
+    // bits at 500 kbit/s) after the first 0x300.
+    let span = got[201].1.duration_since(got[1].1)?;
+    ensure!(
+        span >= Duration::from_micros(200 * 270),
+        "200 frames in {span:?}"
+    );
+    let s = pacer.stats();
+    ensure!(s.delivered == 201 && s.backlog == 0, "{s:?}");
+    ensure!(s.late > 150 && s.max_wait_ms >= 53.0, "{s:?}");
+    Ok(())
+}
+
+/// The bus-overload fault scenario in HIL with the real controller binary: the
+/// babbling node's flood of ID 0, paced at the bit rate, starves the ECUs' reports;
+/// the verdict reports the late frames, and the car ends safe.
+#[test]
+fn an_overloaded_schedule_in_hil_shows_up_as_late_frames_and_the_car_ends_safe() -> Result<()> {
+    let vcan = TestVcan::new("bitt")?;
+    let dir = tempfile::tempdir()?;
+    let results = dir.path().join("results");
+    let scenario = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sim/scenarios/faults/43-can-bus-overload-arbitrated.toml"
+    );
+    let out = Command::new(workspace_bin("ugv-sim")?)
+        .args(["run", scenario, "--can", &vcan.name, "--status-every", "5"])
+        .args(["--time-limit", "12"])
+        .arg("--run-id")
+        .arg(format!("bitt-{}", std::process::id()))
+        .arg("--controller")
+        .arg(workspace_bin("ugv-controller")?)
+        .arg("--results")
+        .arg(&results)
+        .arg("--gps-link")
+        .arg(dir.path().join("gps"))
+        .output()
+        .context("running ugv-sim")?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let verdict: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .with_context(|| format!("verdict on stdout; stderr:\n{stderr}"))?;
+    ensure!(verdict["mode"] == "hil");
+    ensure!(
+        verdict["passed"] == true,
+        "failures: {}\n{verdict:#}\nstderr:\n{stderr}",
+        verdict["failures"]
+    );
+    let a = &verdict["bus_load"]["arbitration"];
+    ensure!(a.is_object(), "no arbitration in the verdict:\n{verdict:#}");
+    ensure!(a["bit_rate"] == 500_000, "{a}");
+    let late = a["late"].as_u64().context("late")?;
+    let delivered = a["delivered"].as_u64().context("delivered")?;
+    ensure!(late > 100 && delivered > late, "{a}");
+    ensure!(a["max_wait_ms"].as_f64().unwrap_or(0.0) > 50.0, "{a}");
+    // The controller's frames were seen and took their bit time.
+    ensure!(a["foreign"].as_u64().unwrap_or(0) > 100, "{a}");
+    ensure!(verdict["collision"] == false);
+    Ok(())
+}
