@@ -24,7 +24,7 @@
 //! and sigmas carry millimetres, speed 0.001 knot (0.5 mm/s), course 0.01° and
 //! heading 0.001°. Such GGA sentences are up to ~90 characters, over NMEA's 82 (as
 //! with u-blox high-precision mode or Trimble receivers); the reader accepts up to
-//! [`MAX_SENTENCE_LEN`] (102, the nmea crate's and gpsd's limit) and the writer never
+//! [`MAX_SENTENCE_LEN`] (102, gpsd's limit) and the writer never
 //! exceeds it.
 //!
 //! # Epochs

@@ -13,6 +13,7 @@
 //! 4 error.
 
 use std::io::IsTerminal;
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -30,6 +31,7 @@ use ugv_sim::ecu::EcuKind;
 use ugv_sim::ecu::station::run_standalone;
 use ugv_sim::hil::{self, Endpoints, HilOptions};
 use ugv_sim::mission::{checked_controller_config, controller_config};
+use ugv_sim::record::live::{self, LiveView};
 use ugv_sim::run::Snapshot;
 use ugv_sim::scenario::Overrides;
 use ugv_sim::sil::Hook;
@@ -224,6 +226,18 @@ struct RunArgs {
     /// to 10000; for watching a run as it goes, or stopping it midway.
     #[arg(long, value_parser = number(0.01, 10_000.0, "times real time"))]
     pace: Option<f64>,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR, an IP address
+    /// and port (127.0.0.1:8765 when no ADDR is given): the topics of run.mcap, with
+    /// --no-record too. In Foxglove: Open connection -> Foxglove WebSocket ->
+    /// ws://ADDR. In SIL it implies --pace 1 (real time) unless --pace is given.
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        default_missing_value = live::DEFAULT_ADDR_TEXT,
+        value_parser = live::parse_addr
+    )]
+    live: Option<SocketAddr>,
 }
 
 fn main() -> ExitCode {
@@ -462,17 +476,34 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         args.sil || args.pace.is_none(),
         "--pace is for SIL runs (HIL runs in real time)"
     );
+    // Started before anything else (in HIL before the endpoints, which may enter a
+    // private network namespace): the server's threads and socket are the host's.
+    let live = match args.live {
+        Some(addr) => {
+            let view = LiveView::start(addr)?;
+            eprintln!("ugv-sim: {}", view.how_to_connect());
+            Some(Arc::new(view))
+        }
+        None => None,
+    };
     if args.sil {
         let started = std::time::Instant::now();
-        let record = (!args.no_record).then_some(args.results.as_path());
-        let pace = args.pace;
+        let outputs = ugv_sim::record::Outputs {
+            dir: (!args.no_record).then_some(args.results.as_path()),
+            live: live.as_deref(),
+        };
+        // A viewer sees the run as it goes: real time unless --pace says otherwise.
+        let pace = args.pace.or(live.as_ref().map(|_| 1.0));
+        if live.is_some() && args.pace.is_none() {
+            eprintln!("ugv-sim: SIL paced at real time for the live view (--pace X to change)");
+        }
         let paced = move |t: f64, _: &mut ugv_sim::sil::SilController| {
             if let Some(due) = pace.map(|p| std::time::Duration::from_secs_f64(t / p)) {
                 std::thread::sleep(due.saturating_sub(started.elapsed()));
             }
             Hook::Continue
         };
-        let run = ugv_sim::sil::run_sil_recorded(sc.clone(), &cfg, paced, record)?;
+        let run = ugv_sim::sil::run_sil_outputs(sc.clone(), &cfg, paced, outputs)?;
         let wall = started.elapsed().as_secs_f64();
         if let Some(s) = &run.recording {
             eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
@@ -513,6 +544,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         results: args.results.clone(),
         status_every: args.status_every,
         record: !args.no_record,
+        live,
         rt_priority: args.rt_priority,
     };
     let stop = stop_on_signal()?;
@@ -631,6 +663,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             results: results.join(&slug),
             status_every: 1.0,
             record,
+            live: None,
             rt_priority: realtime::DEFAULT_PRIORITY,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;

@@ -12,7 +12,9 @@ use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
 use ugv_controller::trace::Trace;
 
 use crate::faults::ProcessFault;
-use crate::record::{RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo};
+use crate::record::{
+    Outputs, RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo,
+};
 use crate::run::{Outcome, Sim, SimError};
 use crate::scenario::Scenario;
 
@@ -78,8 +80,23 @@ pub fn run_sil_with(
 pub fn run_sil_recorded(
     scenario: Scenario,
     cfg: &ControllerConfig,
-    mut hook: impl FnMut(f64, &mut SilController) -> Hook,
+    hook: impl FnMut(f64, &mut SilController) -> Hook,
     record: Option<&std::path::Path>,
+) -> Result<SilRun, SilError> {
+    let outputs = Outputs {
+        dir: record,
+        live: None,
+    };
+    run_sil_outputs(scenario, cfg, hook, outputs)
+}
+
+/// [`run_sil_with`], its topics recorded and/or served live as `outputs` says (see
+/// [`crate::record`]). The loop runs as fast as it can: a hook paces it for a viewer.
+pub fn run_sil_outputs(
+    scenario: Scenario,
+    cfg: &ControllerConfig,
+    mut hook: impl FnMut(f64, &mut SilController) -> Hook,
+    outputs: Outputs<'_>,
 ) -> Result<SilRun, SilError> {
     if !scenario.devices.all_simulated() {
         return Err(SilError::PhysicalDevice(format!("{:?}", scenario.devices)));
@@ -105,16 +122,16 @@ pub fn run_sil_recorded(
         MemLaser::default(),
         CanPort::new(bus.endpoint(), "sil"),
     );
-    let mut rec = match record {
-        Some(dir) => {
+    let mut rec = match outputs.any() {
+        true => {
             let toml = toml::to_string_pretty(cfg).unwrap_or_default();
             let info = RunInfo::of(RecordMode::Sil, &scenario, toml);
             Some(Recording::new(
-                Recorder::create(dir, &scenario, info)?,
+                Recorder::create(outputs, &scenario, info)?,
                 bus.endpoint(),
             ))
         }
-        None => None,
+        false => None,
     };
     let dt = sim.dt();
     let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
@@ -167,6 +184,6 @@ pub fn run_sil_recorded(
         trace,
         controller_exit: exit,
         inputs: rt.stats.clone(),
-        recording: rec.map(Recording::finish),
+        recording: rec.and_then(Recording::finish),
     })
 }

@@ -3,10 +3,11 @@
 
 use super::SentenceError;
 
-/// Longest sentence accepted, from `$` to the checksum, without CR/LF: the nmea
-/// crate's limit (from gpsd: some receivers exceed NMEA's 82 characters; RTK
-/// receivers with 7-decimal minutes do, like this crate's writer).
-pub const MAX_SENTENCE_LEN: usize = nmea::SENTENCE_MAX_LEN;
+/// Longest sentence accepted, from `$` to the checksum, without CR/LF: NMEA 0183's
+/// 82 characters plus 20, gpsd's limit and the one the nmea crate (0.8) applied
+/// before this crate decoded its own fields. Some receivers exceed 82 characters; RTK
+/// receivers with 7-decimal minutes do, like this crate's writer.
+pub const MAX_SENTENCE_LEN: usize = 82 + 20;
 
 /// The NMEA checksum: XOR of the bytes between `$` and `*`.
 pub fn checksum(body: &[u8]) -> u8 {

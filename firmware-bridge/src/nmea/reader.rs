@@ -29,7 +29,7 @@ pub struct ReaderConfig {
 }
 
 impl Default for ReaderConfig {
-    /// Complete on what the default writer sends; the nmea crate's length limit.
+    /// Complete on what the default writer sends; [`MAX_SENTENCE_LEN`] (102).
     fn default() -> Self {
         Self {
             complete_when: Schedule::default().enabled(),
@@ -256,11 +256,12 @@ impl Epoch {
 /// arrived too late: it is counted in [`ReaderStats::late`] and dropped. Epochs are
 /// emitted whatever they contain (a reading without GGA or RMC has no position).
 ///
-/// Sentences are decoded individually (never through the nmea crate's merged
-/// navigation state, which downgrades an RTK fix to GPS when an RMC follows): GGA,
-/// RMC, VTG, GST, HDT and ZDA with `nmea::parse_str`, plus the fields it skips (GGA
-/// age and station, the RMC and VTG mode indicators, the RMC navigational status);
-/// THS, which the nmea crate does not know, by this crate (see `decode.rs`).
+/// Sentences are decoded individually by this crate (see `decode.rs` for the field
+/// rules), every field of GGA, RMC, VTG, GST, HDT, THS and ZDA that a reading carries,
+/// including those the nmea crate used here before skipped (GGA age and station, the
+/// RMC and VTG mode indicators, the RMC navigational status) and THS, which it did not
+/// know; never through a merged navigation state like the nmea crate's, which
+/// downgrades an RTK fix to GPS when an RMC follows.
 #[derive(Debug, Clone)]
 pub struct NmeaReader {
     config: ReaderConfig,

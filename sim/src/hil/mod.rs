@@ -12,6 +12,7 @@ mod process;
 mod wires;
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -32,8 +33,9 @@ use crate::faults::ProcessFault;
 use crate::isolate::IsolateError;
 use crate::measure::fix_latency;
 use crate::mode::Mode;
+use crate::record::live::LiveView;
 use crate::record::tap::SocketTap;
-use crate::record::{RecordError, RecordMode, Recorder, Recording, RunInfo};
+use crate::record::{Outputs, RecordError, RecordMode, Recorder, Recording, RunInfo};
 use crate::run::{Outcome, Sim, SimError, Snapshot};
 use crate::scenario::Scenario;
 use crate::verdict::{RunEnd, judge_and_write};
@@ -161,7 +163,8 @@ impl Endpoints {
             })
         };
         let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
-        let tap = match options.record {
+        // The tap feeds the recording and the live view alike.
+        let tap = match options.record || options.live.is_some() {
             true => Some(SocketTap::open(&iface).map_err(|source| RecordError::Tap {
                 iface: iface.clone(),
                 source,
@@ -282,6 +285,9 @@ pub struct HilOptions {
     pub isolate: Option<String>,
     /// Record the run into `results` (see [`crate::record`]).
     pub record: bool,
+    /// Serve the run's channels on this live view (see [`crate::record::live`]); start
+    /// it before [`Endpoints::open`], which may enter a private network namespace.
+    pub live: Option<Arc<LiveView>>,
     /// SCHED_FIFO priority of the tick loop while it runs, 0 for none (see
     /// [`firmware_bridge::realtime`]).
     pub rt_priority: u8,
@@ -316,10 +322,11 @@ pub fn run_scenario(
         Some(tap) => {
             let toml = toml::to_string_pretty(config).unwrap_or_default();
             let info = RunInfo::of(RecordMode::Hil, sc, toml);
-            Some(Recording::new(
-                Recorder::create(&options.results, sc, info)?,
-                tap,
-            ))
+            let outputs = Outputs {
+                dir: options.record.then_some(options.results.as_path()),
+                live: options.live.as_deref(),
+            };
+            Some(Recording::new(Recorder::create(outputs, sc, info)?, tap))
         }
         None => None,
     };
@@ -409,8 +416,8 @@ pub fn run_scenario(
         recording.as_mut(),
     );
     drop(rt_sched);
-    if let Some(r) = recording {
-        log(&crate::record::describe(&r.finish()));
+    if let Some(summary) = recording.and_then(Recording::finish) {
+        log(&crate::record::describe(&summary));
     }
     // Whatever happened, the controller is asked to finish and its trace collected.
     let trace = controller.as_mut().and_then(|c| {

@@ -21,7 +21,14 @@
 //! ([`Recorder::sensors`]) and, after each step, what crossed the bus
 //! ([`Recording::after_step`], from a [`tap::BusTap`]: a memory-bus endpoint in SIL,
 //! a CAN socket in HIL).
+//!
+//! The same channels feed the live view ([`live::LiveView`], `ugv-sim run --live`)
+//! when one is given ([`Outputs`]): the recorder then logs through the live view's
+//! context, so the files and the WebSocket clients get the same messages; without a
+//! directory (`--no-record`) it writes no file and the channels serve the live view
+//! alone.
 
+pub mod live;
 pub mod replay;
 pub mod tap;
 pub mod topics;
@@ -85,6 +92,12 @@ pub enum RecordError {
     #[error("starting the MCAP writer on {path}: {source}")]
     Mcap {
         path: String,
+        #[source]
+        source: foxglove::FoxgloveError,
+    },
+    #[error("creating the channel {topic}: {source}")]
+    Channel {
+        topic: String,
         #[source]
         source: foxglove::FoxgloveError,
     },
@@ -211,6 +224,23 @@ pub fn direction(spec: &NetworkSpec, id: u32) -> &'static str {
     if controller { "rx" } else { "tx" }
 }
 
+/// Where a run's topics go: files in a directory (run.mcap, bus.log, gps.nmea), a
+/// live view, both, or neither (then no recorder is made at all).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Outputs<'a> {
+    /// Record into this directory (which must exist).
+    pub dir: Option<&'a Path>,
+    /// Serve the channels on this live view too.
+    pub live: Option<&'a live::LiveView>,
+}
+
+impl Outputs<'_> {
+    /// Whether anything is to be recorded or served.
+    pub fn any(&self) -> bool {
+        self.dir.is_some() || self.live.is_some()
+    }
+}
+
 /// A text file written through a buffer, its first error kept.
 #[derive(Debug)]
 struct TextOut {
@@ -228,6 +258,14 @@ impl TextOut {
             path,
             out: Some(BufWriter::new(file)),
         })
+    }
+
+    /// No file (a live view without a recording).
+    fn none() -> TextOut {
+        TextOut {
+            path: PathBuf::new(),
+            out: None,
+        }
     }
 
     fn write(&mut self, bytes: &[u8], error: &mut Option<String>) {
@@ -292,6 +330,8 @@ pub struct Recorder {
     next_state: f64,
     last_mode: Option<String>,
     plans_seen: usize,
+    /// Whether files are written (else the channels serve a live view only).
+    files: bool,
     summary: RecordSummary,
 }
 
@@ -304,36 +344,52 @@ impl std::fmt::Debug for Recorder {
 }
 
 impl Recorder {
-    /// Start the recording of a run of `sc` in `dir` (which must exist).
-    pub fn create(dir: &Path, sc: &Scenario, info: RunInfo) -> Result<Recorder, RecordError> {
+    /// Start the recording of a run of `sc` into `out`: the files in `out.dir` (which
+    /// must exist), the channels on `out.live`'s context when given.
+    pub fn create(out: Outputs<'_>, sc: &Scenario, info: RunInfo) -> Result<Recorder, RecordError> {
+        let dir = out.dir.unwrap_or(Path::new(""));
         let mcap_path = dir.join(MCAP_FILE);
         let mcap_err = |source| RecordError::Mcap {
             path: mcap_path.display().to_string(),
             source,
         };
-        let ctx = Context::new();
-        let file = File::create(&mcap_path).map_err(|source| RecordError::Create {
-            path: mcap_path.display().to_string(),
-            source,
-        })?;
-        let options = McapWriteOptions::new()
-            .compression(None)
-            .chunk_size(Some(CHUNK_SIZE));
-        let mcap = ctx
-            .mcap_writer_with_options(options)
-            .create(BufWriter::new(file))
-            .map_err(mcap_err)?;
-        mcap.write_metadata(RUN_METADATA, info.metadata())
-            .map_err(mcap_err)?;
-        mcap.attach(&foxglove::McapAttachment {
-            log_time: info.epoch_unix_ns,
-            create_time: info.epoch_unix_ns,
-            name: CONFIG_ATTACHMENT.to_owned(),
-            media_type: "application/toml".to_owned(),
-            data: std::borrow::Cow::Borrowed(info.controller_toml.as_bytes()),
-        })
-        .map_err(mcap_err)?;
-        let json = |topic| json_channel(&ctx, topic).map_err(mcap_err);
+        let ctx = match out.live {
+            Some(live) => Arc::clone(live.context()),
+            None => Context::new(),
+        };
+        let mcap = match out.dir {
+            Some(_) => {
+                let file = File::create(&mcap_path).map_err(|source| RecordError::Create {
+                    path: mcap_path.display().to_string(),
+                    source,
+                })?;
+                let options = McapWriteOptions::new()
+                    .compression(None)
+                    .chunk_size(Some(CHUNK_SIZE));
+                let mcap = ctx
+                    .mcap_writer_with_options(options)
+                    .create(BufWriter::new(file))
+                    .map_err(mcap_err)?;
+                mcap.write_metadata(RUN_METADATA, info.metadata())
+                    .map_err(mcap_err)?;
+                mcap.attach(&foxglove::McapAttachment {
+                    log_time: info.epoch_unix_ns,
+                    create_time: info.epoch_unix_ns,
+                    name: CONFIG_ATTACHMENT.to_owned(),
+                    media_type: "application/toml".to_owned(),
+                    data: std::borrow::Cow::Borrowed(info.controller_toml.as_bytes()),
+                })
+                .map_err(mcap_err)?;
+                Some(mcap)
+            }
+            None => None,
+        };
+        let json = |topic: &str| {
+            json_channel(&ctx, topic).map_err(|source| RecordError::Channel {
+                topic: topic.to_owned(),
+                source,
+            })
+        };
         let ch = Channels {
             laser: None,
             fix: ctx.channel_builder(topics::FIX).build(),
@@ -360,11 +416,15 @@ impl Recorder {
                 }
             )
         });
+        let text = |name| match out.dir {
+            Some(dir) => TextOut::create(dir.join(name)),
+            None => Ok(TextOut::none()),
+        };
         Ok(Recorder {
             ch,
-            mcap: Some(mcap),
-            bus_log: TextOut::create(dir.join(BUS_LOG))?,
-            nmea: TextOut::create(dir.join(NMEA_FILE))?,
+            mcap,
+            bus_log: text(BUS_LOG)?,
+            nmea: text(NMEA_FILE)?,
             spec,
             info,
             obstacles,
@@ -375,6 +435,7 @@ impl Recorder {
             next_state: 0.0,
             last_mode: None,
             plans_seen: 0,
+            files: out.dir.is_some(),
             summary: RecordSummary {
                 dir: dir.to_path_buf(),
                 ..RecordSummary::default()
@@ -741,8 +802,9 @@ impl Recorder {
         self.summary.error = error;
     }
 
-    /// Close the files (the MCAP with its summary section).
-    pub fn finish(mut self) -> RecordSummary {
+    /// Close the files (the MCAP with its summary section); what they hold, when files
+    /// were written.
+    pub fn finish(mut self) -> Option<RecordSummary> {
         self.flush();
         if let Some(m) = self.mcap.take()
             && let Err(e) = m.close()
@@ -751,7 +813,7 @@ impl Recorder {
                 .error
                 .get_or_insert_with(|| format!("closing {MCAP_FILE}: {e}"));
         }
-        self.summary.clone()
+        self.files.then(|| self.summary.clone())
     }
 }
 
@@ -801,7 +863,8 @@ impl<T: BusTap> Recording<T> {
         self.recorder.maybe_flush();
     }
 
-    pub fn finish(self) -> RecordSummary {
+    /// See [`Recorder::finish`].
+    pub fn finish(self) -> Option<RecordSummary> {
         self.recorder.finish()
     }
 }
