@@ -120,6 +120,18 @@ impl PlanWorker {
     }
 }
 
+/// Where replanning runs.
+#[derive(Debug)]
+enum Planning {
+    /// In the tick that asks for it (SIL: deterministic).
+    Inline,
+    /// On a thread of its own, taken at the first tick after it finished (the binary).
+    Thread(PlanWorker),
+    /// In the tick that asks for it, taken at the next tick: the thread's timing when
+    /// the plan takes less than a tick, deterministically (a replay of a HIL run).
+    NextTick(Option<Box<PlanOutcome>>),
+}
+
 /// The controller.
 #[derive(Debug)]
 pub struct Controller {
@@ -141,8 +153,8 @@ pub struct Controller {
     next_fault: f64,
     /// Scans perception refused.
     pub bad_scans: u64,
-    /// Replanning off the command loop (HIL); inline when None (SIL, deterministic).
-    worker: Option<PlanWorker>,
+    /// Where replanning runs: off the command loop in HIL, inline in SIL.
+    planning: Planning,
     /// The code sent in FAULT_REPORT while in estop.
     fault_code: FaultReportCode,
     /// The FAULT_REPORT detail while in estop (the CAN ID a finding concerns).
@@ -175,7 +187,7 @@ impl Controller {
             next_command: 0.0,
             next_fault: 0.0,
             bad_scans: 0,
-            worker: None,
+            planning: Planning::Inline,
             fault_code: FaultReportCode::Internal,
             fault_detail: 0,
             watch: ActuationWatch::new(),
@@ -186,21 +198,42 @@ impl Controller {
     /// Replan on a thread of its own from now on (the binary does; SIL keeps replanning
     /// inline so runs stay deterministic).
     pub fn with_planning_thread(mut self) -> std::io::Result<Controller> {
-        self.worker = Some(PlanWorker::spawn()?);
+        self.planning = Planning::Thread(PlanWorker::spawn()?);
         Ok(self)
+    }
+
+    /// Take each replanning at the tick after the one that asked for it, as the
+    /// planning thread does when a plan takes less than a tick, but deterministically:
+    /// for replaying a run of the binary.
+    pub fn with_plans_taken_next_tick(mut self) -> Controller {
+        self.planning = Planning::NextTick(None);
+        self
     }
 
     /// Start a replanning when one is due and take the finished ones.
     fn plan(&mut self, now: f64, pose: &Pose) {
-        match &mut self.worker {
-            None => {
+        match &mut self.planning {
+            Planning::Inline => {
                 if self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
                     let outcome = solve(&self.nav.request(now, pose, &self.obstacles));
                     self.nav.accept(outcome);
                 }
             }
-            Some(w) => {
+            Planning::NextTick(done) => {
+                if let Some(outcome) = done.take() {
+                    self.nav.accept(*outcome);
+                }
+                if self.nav.replan_due(now, pose) {
+                    self.nav.issued(now);
+                    *done = Some(Box::new(solve(&self.nav.request(
+                        now,
+                        pose,
+                        &self.obstacles,
+                    ))));
+                }
+            }
+            Planning::Thread(w) => {
                 while let Ok(outcome) = w.outcomes.try_recv() {
                     self.nav.accept(outcome);
                     w.in_flight = false;

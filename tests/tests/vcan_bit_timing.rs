@@ -106,8 +106,9 @@ fn paced_sockets_put_frames_on_vcan_at_the_bit_rate_lowest_id_first() -> Result<
     );
     let s = pacer.stats();
     ensure!(s.delivered == FLOOD as u64 + 1 && s.backlog == 0, "{s:?}");
-    // Every frame but the first two waited more than 5 ms; the last the whole flood.
-    ensure!(s.late >= FLOOD as u64 - 1, "{s:?}");
+    // All but the first few (queued while the first was on the bus, or 0x100 landing
+    // at the start of a slot) waited more than 5 ms; the last almost the whole flood.
+    ensure!(s.late >= FLOOD as u64 - 5, "{s:?}");
     let flood_ms = (FRAME * FLOOD as u32).as_secs_f64() * 1e3;
     ensure!(s.max_wait_ms >= 0.9 * flood_ms, "{s:?}");
     Ok(())

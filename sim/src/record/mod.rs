@@ -128,6 +128,9 @@ pub struct RunInfo {
     pub can_interface: String,
     /// The GPS sentences that complete an epoch (the controller's reader setting).
     pub gps_sentences: firmware_bridge::nmea::SentenceSet,
+    /// The GPS line's baud rate: in HIL a sentence reaches the controller once its
+    /// last byte crossed the line.
+    pub gps_baud: u32,
     /// The controller's configuration (TOML), for a replay into the same controller.
     #[serde(skip)]
     pub controller_toml: String,
@@ -147,6 +150,7 @@ impl RunInfo {
             epoch_unix_ns: sc.sim.epoch.unix_ns(),
             can_interface: sc.can.interface.clone(),
             gps_sentences: sc.gps.sentence_set(),
+            gps_baud: sc.gps.baud,
             controller_toml,
         }
     }

@@ -200,6 +200,11 @@ impl Recorded {
             epoch_unix_ns: field(name, &meta, "epoch_unix_ns")?,
             can_interface: field(name, &meta, "can_interface")?,
             gps_sentences: field(name, &meta, "gps_sentences")?,
+            // Recordings made before the field: the scenarios' default line.
+            gps_baud: match meta.contains_key("gps_baud") {
+                true => field(name, &meta, "gps_baud")?,
+                false => DEFAULT_GPS_BAUD,
+            },
             controller_toml: config_text.clone().ok_or_else(|| ReplayError::NoConfig {
                 path: name.to_owned(),
             })?,
@@ -223,6 +228,25 @@ impl Recorded {
         let mut inputs = Vec::new();
         let mut commands = Vec::new();
         let mut skipped = 0;
+        // HIL: a CAN frame's log time is the tick that read it, its kernel receive
+        // time rides along (wall_unix_ns). The simulator stamps each NMEA sentence
+        // with the wall clock when it handled the tick (never before the tick's
+        // deadline), so the smallest wall - log difference is the wall clock at
+        // simulated time 0, to within the least late tick: the frames go on the log
+        // time at their kernel time through it.
+        let nmea_channels: Vec<u16> = channels
+            .values()
+            .filter(|c| c.topic == topics::NMEA)
+            .map(|c| c.id)
+            .collect();
+        let wall_offset: Option<i128> = messages
+            .iter()
+            .filter(|(channel, _, _)| nmea_channels.contains(channel))
+            .filter_map(|(_, ns, data)| {
+                let v: serde_json::Value = serde_json::from_slice(data).ok()?;
+                Some(i128::from(v["wall_unix_ns"].as_u64()?) - i128::from(*ns))
+            })
+            .min();
         for (index, (channel, ns, data)) in messages.into_iter().enumerate() {
             let Some(ch) = channels.get(&channel) else {
                 continue;
@@ -261,6 +285,12 @@ impl Recorded {
                         .and_then(hex_bytes)
                         .ok_or_else(|| bad("\"data\" is not 0 to 8 hex bytes".to_owned()))?;
                     let extended = v["extended"].as_bool().unwrap_or(false);
+                    let ns = match (wall_offset, v["wall_unix_ns"].as_u64()) {
+                        (Some(offset), Some(wall)) => {
+                            u64::try_from(i128::from(wall) - offset).unwrap_or(ns)
+                        }
+                        _ => ns,
+                    };
                     if super::direction(&spec, id) == "rx" {
                         commands.push(Command {
                             ns,
@@ -532,6 +562,72 @@ fn hex(data: &[u8]) -> String {
     data.iter().map(|b| format!("{b:02X}")).collect()
 }
 
+/// The GPS line's baud rate of a recording that does not say (the scenarios' default).
+const DEFAULT_GPS_BAUD: u32 = 115_200;
+
+/// The recorded inputs in the order they reached the controller, each with that time
+/// (ns on the log time). SIL: at their log time (memory ports). HIL: a GPS sentence
+/// once its last byte crossed the line at the baud rate (ten bits a byte), the line
+/// carrying the sentences one after the other from when the simulator queued them;
+/// laser frames and CAN frames at their log time (the publish time, the kernel's
+/// receive time).
+fn arrivals(rec: &Recorded) -> Vec<(u64, &Input)> {
+    let ns_per_byte = 10.0 * 1e9 / f64::from(rec.info.gps_baud.max(1));
+    let mut line_free = 0u64;
+    let mut out: Vec<(u64, &Input)> = rec
+        .inputs
+        .iter()
+        .map(|(ns, input)| match (rec.info.mode, input) {
+            (RecordMode::Hil, Input::Gps(bytes)) => {
+                let end = (*ns).max(line_free) + (bytes.len() as f64 * ns_per_byte) as u64;
+                line_free = end;
+                (end, input)
+            }
+            _ => (*ns, input),
+        })
+        .collect();
+    out.sort_by_key(|(ns, _)| *ns);
+    out
+}
+
+/// The controller's ticks to replay: (its clock, ns on the log time by which the
+/// tick's inputs had arrived). SIL: every `COMMAND_PERIOD` on the physics steps from
+/// `start_ns` to `last_ns`, as the SIL loop ran it. HIL: the recorded controller's own
+/// ticks, each seen as the burst of frames it sent (frames less than half a period
+/// apart), its clock the tick's deadline (the binary steps on `k * COMMAND_PERIOD`,
+/// late or not).
+fn ticks(rec: &Recorded, start_ns: u64, last_ns: u64) -> Vec<(f64, u64)> {
+    let ns_of = |t: f64| start_ns + (t.max(0.0) * 1e9).round() as u64;
+    match rec.info.mode {
+        RecordMode::Sil => {
+            let dt = 1.0 / rec.info.physics_hz;
+            let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
+            (0..)
+                .map(|k: u64| (k * control_every) as f64 * dt)
+                .map(|now| (now, ns_of(now)))
+                .take_while(|(_, ns)| *ns <= last_ns)
+                .collect()
+        }
+        RecordMode::Hil => {
+            let period_ns = COMMAND_PERIOD * 1e9;
+            let mut out: Vec<(f64, u64)> = Vec::new();
+            let mut burst_start: Option<u64> = None;
+            for c in &rec.commands {
+                if burst_start.is_some_and(|b| c.ns.saturating_sub(b) as f64 <= period_ns / 2.0) {
+                    continue;
+                }
+                burst_start = Some(c.ns);
+                let k = (c.ns.saturating_sub(start_ns) as f64 / period_ns).round();
+                let now = k * COMMAND_PERIOD;
+                if out.last().is_none_or(|(t, _)| *t < now) {
+                    out.push((now, c.ns));
+                }
+            }
+            out
+        }
+    }
+}
+
 /// How many bytes of NMEA a serial line (a pty's or a tty's receive buffer) keeps for
 /// a reader that has not opened it yet: Linux's N_TTY buffer.
 const LINE_BUFFER: usize = 4096;
@@ -555,12 +651,12 @@ fn controller_start(rec: &Recorded) -> u64 {
 /// of the first input after that. The GPS line keeps the newest whole sentences that
 /// fit its buffer, the laser service keeps its newest frame (the subscriber's
 /// history), and a CAN socket hears only frames sent after it was opened.
-fn waiting_at_start(rec: &Recorded, start_ns: u64) -> (Vec<&Input>, usize) {
-    let first_after = rec.inputs.partition_point(|(ns, _)| *ns < start_ns);
-    let before = &rec.inputs[..first_after];
+fn waiting_at_start<'a>(arrived: &[(u64, &'a Input)], start_ns: u64) -> (Vec<&'a Input>, usize) {
+    let first_after = arrived.partition_point(|(ns, _)| *ns < start_ns);
+    let before = &arrived[..first_after];
     let mut waiting = Vec::new();
     let mut line_bytes = 0;
-    for (_, input) in before.iter().rev() {
+    for &(_, input) in before.iter().rev() {
         match input {
             Input::Gps(bytes) if line_bytes + bytes.len() <= LINE_BUFFER => {
                 line_bytes += bytes.len();
@@ -583,8 +679,13 @@ fn waiting_at_start(rec: &Recorded, start_ns: u64) -> (Vec<&Input>, usize) {
 pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayError> {
     let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?;
     let bus = MemBus::new();
+    // The binary replans on a thread and takes the plan at the next tick.
+    let controller = match rec.info.mode {
+        RecordMode::Sil => Controller::new(&rec.config)?,
+        RecordMode::Hil => Controller::new(&rec.config)?.with_plans_taken_next_tick(),
+    };
     let mut rt = Runtime::new(
-        Controller::new(&rec.config)?,
+        controller,
         MemGps::new(ReaderConfig {
             complete_when: rec.info.gps_sentences,
             ..ReaderConfig::default()
@@ -615,11 +716,8 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         .max(rec.commands.last().map(|c| c.ns))
         .unwrap_or(rec.info.epoch_unix_ns);
     let start_ns = controller_start(rec);
-    let ns_of = |t: f64| start_ns + (t.max(0.0) * 1e9).round() as u64;
-    // SIL's grid: the controller ticks on every control_every-th physics step.
-    let dt = 1.0 / rec.info.physics_hz;
-    let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
-    let (backlog, mut next_input) = waiting_at_start(rec, start_ns);
+    let arrived = arrivals(rec);
+    let (backlog, mut next_input) = waiting_at_start(&arrived, start_ns);
     for input in backlog {
         match input {
             Input::Gps(bytes) => rt.gps_mut().push(bytes),
@@ -627,16 +725,10 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
             Input::Can { .. } => {}
         }
     }
-    let mut k: u64 = 0;
     let mut exit = None;
     let mut replayed_s = 0.0;
-    loop {
-        let now = k as f64 * dt;
-        let tick_ns = ns_of(now);
-        if tick_ns > last_ns {
-            break;
-        }
-        while let Some((ns, input)) = rec.inputs.get(next_input) {
+    for (now, tick_ns) in ticks(rec, start_ns, last_ns) {
+        while let Some((ns, input)) = arrived.get(next_input) {
             if *ns > tick_ns {
                 break;
             }
@@ -668,7 +760,6 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         if exit.is_some() {
             break;
         }
-        k += control_every;
     }
     cmp.close_before(u64::MAX);
     Ok(ReplayReport {
@@ -699,6 +790,7 @@ mod tests {
                 epoch_unix_ns: 1_000,
                 can_interface: "vcan0".to_owned(),
                 gps_sentences: ReaderConfig::default().complete_when,
+                gps_baud: DEFAULT_GPS_BAUD,
                 controller_toml: String::new(),
             },
             config: ControllerConfig::default(),
@@ -751,7 +843,9 @@ mod tests {
             (2_000, sentence(5)),
         ];
         let rec = recording(RecordMode::Hil, inputs, Vec::new());
-        let (waiting, next) = waiting_at_start(&rec, 2_000);
+        // As they arrived (here: at their log times).
+        let arrived: Vec<(u64, &Input)> = rec.inputs.iter().map(|(ns, i)| (*ns, i)).collect();
+        let (waiting, next) = waiting_at_start(&arrived, 2_000);
         // Sentence 5 is at the start itself: delivered at the first tick, not waiting.
         assert_eq!(next, 7);
         let kinds: Vec<String> = waiting
@@ -765,6 +859,57 @@ mod tests {
         // 4096 bytes hold two 1500-byte sentences (the third would overflow): 3 and 4,
         // oldest first, with the newest scan between them; no CAN frame.
         assert_eq!(kinds, ["gps3", "laser", "gps4"]);
+    }
+
+    #[test]
+    fn in_hil_a_sentence_arrives_once_its_bytes_crossed_the_line() {
+        let ms = 1_000_000;
+        let inputs = vec![
+            // 11.52 bytes a millisecond at 115200 baud: 1152 bytes take 100 ms.
+            (0, Input::Gps(vec![b'$'; 1152])),
+            // Queued while the first is on the line: it follows it.
+            (5 * ms, Input::Gps(vec![b'$'; 576])),
+            (
+                6 * ms,
+                Input::Can {
+                    id: 1,
+                    data: vec![],
+                },
+            ),
+            (130 * ms, Input::Gps(vec![b'$'; 576])),
+            // The line idle again: 50 ms after it was queued.
+            (300 * ms, Input::Gps(vec![b'$'; 576])),
+        ];
+        let mut rec = recording(RecordMode::Hil, inputs, Vec::new());
+        rec.info.gps_baud = 115_200;
+        let at: Vec<u64> = arrivals(&rec).iter().map(|(ns, _)| *ns / ms).collect();
+        assert_eq!(at, [6, 100, 150, 200, 350]);
+        // SIL's memory ports deliver at once.
+        rec.info.mode = RecordMode::Sil;
+        let at: Vec<u64> = arrivals(&rec).iter().map(|(ns, _)| *ns / ms).collect();
+        assert_eq!(at, [0, 5, 6, 130, 300]);
+    }
+
+    #[test]
+    fn a_hil_replay_ticks_when_the_recorded_controller_did_on_its_deadlines() {
+        let ms = 1_000_000;
+        let frame = |ns: u64| Command {
+            ns,
+            id: 0x100,
+            data: vec![0],
+        };
+        // Ticks at 0, 10 (two frames 1 ms apart), 23 (3 ms late), 30, then a stall
+        // until 61 (the ticks of 40, 50 skipped).
+        let commands = [0, 10, 11, 23, 30, 61]
+            .into_iter()
+            .map(|t| frame(1_000 + t * ms))
+            .collect();
+        let rec = recording(RecordMode::Hil, Vec::new(), commands);
+        let t: Vec<(u64, u64)> = ticks(&rec, 1_000, u64::MAX)
+            .into_iter()
+            .map(|(now, ns)| ((now * 1e3).round() as u64, (ns - 1_000) / ms))
+            .collect();
+        assert_eq!(t, [(0, 0), (10, 10), (20, 23), (30, 30), (60, 61)]);
     }
 
     #[test]
