@@ -8,7 +8,9 @@
 #   target/debug/vcan-setup vm -- bash scripts/live-lateness.sh
 #
 # Uses the release binaries ($UGV_BIN_DIR, default target/release); leaves both runs
-# (verdicts, recordings) and the client's report in results/live-lateness/.
+# (verdicts, recordings) and the client's report in results/live-lateness/. CLIENT_NICE
+# runs the client at that niceness (default 0), CLIENT_WINDOW its count over that many
+# seconds (default 8: the drive lasts about 20).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=${UGV_BIN_DIR:-$PWD/target/release}
@@ -22,7 +24,7 @@ run() {
         --run-id "live-$name-$$" "$@" >"$out/$name.verdict" 2>"$out/$name.log" || true
 }
 run off
-python3 sim/tests/live_client.py ws://127.0.0.1:8765 --window 15 --connect-timeout 60 \
+nice -n "${CLIENT_NICE:-0}" python3 sim/tests/live_client.py ws://127.0.0.1:8765 --window "${CLIENT_WINDOW:-8}" --connect-timeout 60 \
     >"$out/client.json" 2>"$out/client.log" &
 client=$!
 run on --live 127.0.0.1:8765
