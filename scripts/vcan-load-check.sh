@@ -49,15 +49,15 @@ clean = 0
 for i in range(1, runs + 1):
     log = out / f"run-{i}.log"
     text = log.read_text(errors="replace") if log.exists() else ""
-    m = re.findall(r"Summary \[ *([\d.]+)s\] (\d+) tests? run: (\d+) passed(?: \((\d+) flaky\))?(?:, (\d+) failed)?", text)
+    m = re.findall(r"Summary \[ *([\d.]+)s\] (\d+) tests? run: (\d+) passed(?: \((?:\d+ slow, )?(\d+) flaky\))?(?:, (\d+) failed)?", text)
     if not m:
         print(f"run {i}: no summary (see {log})")
         continue
     secs, total, passed, flaky, failed = m[-1]
     flaky, failed = int(flaky or 0), int(failed or 0)
     first = int(passed) - flaky
-    flaky_names = re.findall(r"FLAKY \d+/\d+ \[.*?\] +\S+ (\S+)", text)
-    failed_names = sorted(set(re.findall(r"^ +FAIL \[.*?\] +\S+ (\S+)", text, re.M)))
+    flaky_names = re.findall(r"FLAKY \d+/\d+ \[.*?\] +\(.*?\) +\S+ (\S+)", text)
+    failed_names = sorted(set(re.findall(r"^ +FAIL \[.*?\] +\(.*?\) +\S+ (\S+)", text, re.M)))
     ok = failed == 0
     clean += ok
     print(f"run {i}: {'passed' if ok else 'FAILED'} in {float(secs):.0f} s; {total} tests: "
