@@ -5,9 +5,10 @@
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use std::io::Read;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+mod child_common;
 
 /// Generous: a number that is not refused starts a run (or an ECU) that goes on; it
 /// is killed after this and the test fails.
@@ -23,26 +24,12 @@ fn assert_refused(args: &[&str], argument: &str, range: &str) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let deadline = Instant::now() + WAIT;
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        if Instant::now() > deadline {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("ugv-sim {args:?} was not refused: still running after {WAIT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    };
-    let mut stderr = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut stderr)
-        .unwrap();
-    assert_eq!(status.code(), Some(2), "{args:?}: {stderr}");
+    let (code, stderr) = child_common::exit_and_stderr(
+        &mut child,
+        WAIT,
+        &format!("ugv-sim {args:?} was not refused"),
+    );
+    assert_eq!(code, Some(2), "{args:?}: {stderr}");
     assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
     assert!(stderr.contains(argument), "{args:?}: {stderr}");
     assert!(stderr.contains(range), "{args:?}: {stderr}");

@@ -8,13 +8,14 @@
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use std::io::Read;
 use std::net::TcpListener;
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde_json::Value;
+
+mod child_common;
 
 const CLIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/live_client.py");
 
@@ -50,26 +51,7 @@ impl Sim {
     /// Its exit code and stderr, waiting at most `limit`.
     fn finish(mut self, limit: Duration) -> (Option<i32>, String) {
         let mut child = self.0.take().unwrap();
-        let deadline = Instant::now() + limit;
-        let status = loop {
-            if let Some(s) = child.try_wait().unwrap() {
-                break s;
-            }
-            if Instant::now() > deadline {
-                let _ = child.kill();
-                let _ = child.wait();
-                panic!("ugv-sim still running after {limit:?}");
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        };
-        let mut stderr = String::new();
-        child
-            .stderr
-            .take()
-            .unwrap()
-            .read_to_string(&mut stderr)
-            .unwrap();
-        (status.code(), stderr)
+        child_common::exit_and_stderr(&mut child, limit, "ugv-sim")
     }
 }
 
