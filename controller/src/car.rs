@@ -13,6 +13,11 @@ pub struct Car {
     /// The circle the planner treats the car as, around the rear axle (the paper's
     /// r_0), metres.
     pub radius: f64,
+    /// Footprint length and width, and the rear bumper's distance behind the rear axle,
+    /// metres.
+    pub length: f64,
+    pub width: f64,
+    pub rear_overhang: f64,
     /// GPS antenna position in the vehicle frame (x forward, y left of the rear axle),
     /// metres.
     pub antenna: [f64; 2],
@@ -27,6 +32,9 @@ pub const PAPER_CAR: Car = Car {
     max_steer_deg: 35.0,
     max_speed: 6.7,
     radius: 2.0,
+    length: 2.4,
+    width: 1.2,
+    rear_overhang: 0.375,
     antenna: [0.5, 0.0],
     laser: [2.0, 0.0],
     laser_yaw_deg: 0.0,

@@ -26,6 +26,11 @@ pub struct Vehicle {
     pub max_speed: f64,
     /// The circle the planner treats the car as, around the rear axle (the paper's r_0).
     pub radius: f64,
+    /// The footprint: length, width and the rear bumper's distance behind the rear
+    /// axle, metres (passages narrower than the circle are checked with it).
+    pub length: f64,
+    pub width: f64,
+    pub rear_overhang: f64,
     /// GPS antenna position in the vehicle frame (x forward, y left of the rear axle).
     pub antenna_x: f64,
     pub antenna_y: f64,
@@ -44,6 +49,9 @@ impl Default for Vehicle {
             steer_rate_deg_s: 0.0,
             max_speed: car.max_speed,
             radius: car.radius,
+            length: car.length,
+            width: car.width,
+            rear_overhang: car.rear_overhang,
             antenna_x: car.antenna[0],
             antenna_y: car.antenna[1],
             laser_x: car.laser[0],
@@ -67,6 +75,14 @@ pub struct PlannerConfig {
     pub horizon_min_m: f64,
     /// Added to the vehicle radius for every obstacle, metres.
     pub safety_margin: f64,
+    /// Passages narrower than the planning circle: when no path clears it, paths are
+    /// planned with half the car's width plus this as the circle and taken only where
+    /// the car's rectangle clears every obstacle by this, metres. Walls are covered by
+    /// circles that reach up to 0.25 m past their ends, so a gate in a wall needs
+    /// about 0.25 m more on each side than a gap between posts.
+    pub passage_margin: f64,
+    /// Speed through such a passage, m/s.
+    pub passage_speed: f64,
     /// Cruise speed; t_f - t_k = (x_f - x_k) / cruise_speed, m/s.
     pub cruise_speed: f64,
     /// Fraction of the steering limit a planned path may use.
@@ -104,6 +120,8 @@ impl Default for PlannerConfig {
             horizon_m: 20.0,
             horizon_min_m: 8.0,
             safety_margin: 0.3,
+            passage_margin: 0.15,
+            passage_speed: 1.0,
             cruise_speed: 2.0,
             steer_usage: 0.85,
             final_approach: 1.5,
@@ -305,6 +323,27 @@ impl ControllerConfig {
         )?;
         positive_up_to(&at("max_speed"), v.max_speed, 10.0, "m/s")?;
         positive_up_to(&at("radius"), v.radius, 20.0, "m")?;
+        positive_up_to(&at("length"), v.length, 20.0, "m")?;
+        positive_up_to(&at("width"), v.width, 10.0, "m")?;
+        within(
+            &at("rear_overhang"),
+            v.rear_overhang,
+            0.0,
+            v.length,
+            "m (up to length)",
+        )?;
+        let corner = (v.length - v.rear_overhang)
+            .max(v.rear_overhang)
+            .hypot(v.width / 2.0);
+        if corner > v.radius + self.planner.safety_margin {
+            return Err(FieldError::new(
+                at("radius"),
+                format!(
+                    "{} plus planner.safety_margin {} must contain the footprint (its farthest corner is {corner:.2} m from the rear axle)",
+                    v.radius, self.planner.safety_margin
+                ),
+            ));
+        }
         for (k, x) in [
             ("antenna_x", v.antenna_x),
             ("antenna_y", v.antenna_y),
@@ -327,6 +366,13 @@ impl ControllerConfig {
             "m (up to horizon_m)",
         )?;
         within(&at("safety_margin"), pc.safety_margin, 0.0, 5.0, "m")?;
+        within(&at("passage_margin"), pc.passage_margin, 0.0, 5.0, "m")?;
+        positive_up_to(
+            &at("passage_speed"),
+            pc.passage_speed,
+            v.max_speed,
+            "m/s (up to vehicle.max_speed)",
+        )?;
         positive(&at("cruise_speed"), pc.cruise_speed)?;
         if pc.cruise_speed > v.max_speed {
             return Err(FieldError::new(

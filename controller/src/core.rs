@@ -167,9 +167,10 @@ pub struct Controller {
 impl Controller {
     pub fn new(cfg: &ControllerConfig) -> Result<Controller, ControllerError> {
         cfg.validate()?;
-        // Walls become chains of circles sized for the radius the planner inflates by.
+        // Walls become chains of circles sized for the least the planner inflates by:
+        // the passage margin the car's rectangle is checked with.
         let mut perception = cfg.perception.clone();
-        perception.vehicle_radius = cfg.vehicle.radius + cfg.planner.safety_margin;
+        perception.vehicle_radius = cfg.planner.passage_margin;
         Ok(Controller {
             loc: Localiser::new(cfg)?,
             perception: Perception::new(perception)?,

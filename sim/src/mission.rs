@@ -25,6 +25,9 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.max_steer_deg = scenario.vehicle.max_steer_deg;
     v.max_speed = scenario.vehicle.max_speed;
     v.radius = scenario.vehicle.radius;
+    v.length = scenario.vehicle.length;
+    v.width = scenario.vehicle.width;
+    v.rear_overhang = scenario.vehicle.rear_overhang;
     v.antenna_x = scenario.gps.antenna_x;
     v.antenna_y = scenario.gps.antenna_y;
     v.laser_x = scenario.laser.mount_x;

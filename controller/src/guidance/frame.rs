@@ -13,6 +13,19 @@ pub struct Circle {
     pub vy: f64,
 }
 
+impl From<&Circle> for crate::planner::Obstacle {
+    /// The same disc, world frame kept.
+    fn from(c: &Circle) -> Self {
+        crate::planner::Obstacle {
+            x: c.x,
+            y: c.y,
+            radius: c.radius,
+            vx: c.vx,
+            vy: c.vy,
+        }
+    }
+}
+
 /// A planning frame: origin on the route, x towards the local goal.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathFrame {

@@ -57,6 +57,7 @@
 mod align;
 mod error;
 mod follower;
+mod footprint;
 mod frame;
 mod pacing;
 mod search;
@@ -65,6 +66,7 @@ mod solver;
 pub use align::Align;
 pub use error::{GuidanceError, ReplanError};
 pub use follower::{FollowInputs, SteeringLaw};
+pub use footprint::Footprint;
 pub use frame::{Circle, PathFrame};
 pub use pacing::{Pacing, sweep};
 pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
@@ -74,7 +76,7 @@ use crate::localisation::Pose;
 use crate::planner::{self, PlanProblem, Trajectory};
 use crate::route::{Route, RoutePoint};
 use frame::{clip_to_start, wrap};
-use search::{MAX_GOAL_HEADING, MAX_LOCAL_HEADING};
+use search::{Clearance, MAX_GOAL_HEADING, MAX_LOCAL_HEADING};
 
 /// What guidance asks of the actuators.
 #[derive(Clone, Debug, PartialEq)]
@@ -112,6 +114,11 @@ pub struct Navigator {
     active: Option<Trajectory>,
     /// The active path was planned around moving obstacles: drive its pace.
     paced: bool,
+    /// The active path goes through a passage narrower than the planning circle:
+    /// drive it at the passage speed.
+    passage: bool,
+    /// The last replanning found an obstacle on the mission's goal.
+    goal_blocked: bool,
     /// Turning towards the goal on this road-wheel angle before planning, radians.
     aligning: Option<f64>,
     next_replan: f64,
@@ -136,6 +143,8 @@ impl Navigator {
             law,
             active: None,
             paced: false,
+            passage: false,
+            goal_blocked: false,
             aligning: None,
             next_replan: 0.0,
             infeasible_since: None,
@@ -155,9 +164,7 @@ impl Navigator {
     /// it lies outside every inflated static obstacle; the nominal one when none does
     /// (the planner then finds no path, and the car stops).
     pub fn local_goal(&self, s: f64, obstacles: &[Circle]) -> RoutePoint {
-        let pc = &self.cfg.planner;
-        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
-        search::local_goal(&self.route, pc, r0, s, obstacles)
+        search::local_goal(&self.route, &self.cfg.planner, &self.wide(), s, obstacles)
     }
 
     /// Local goals to try when the first has no feasible path (detours): the first
@@ -167,13 +174,45 @@ impl Navigator {
     /// first with a feasible path wins: the least lateral shift, then the farther goal,
     /// then right before left.
     pub fn detours(&self, s: f64, first: &RoutePoint, obstacles: &[Circle]) -> Vec<RoutePoint> {
-        let pc = &self.cfg.planner;
-        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
-        search::detours(&self.route, pc, r0, s, first, obstacles)
+        search::detours(
+            &self.route,
+            &self.cfg.planner,
+            &self.wide(),
+            s,
+            first,
+            obstacles,
+        )
+    }
+
+    /// What paths are planned with first: the car's circle plus the safety margin.
+    fn wide(&self) -> Clearance {
+        Clearance::circle(self.cfg.vehicle.radius + self.cfg.planner.safety_margin)
+    }
+
+    /// The car's rectangle grown by the passage margin.
+    pub fn footprint(&self) -> Footprint {
+        let v = &self.cfg.vehicle;
+        Footprint {
+            front: v.length - v.rear_overhang,
+            rear: v.rear_overhang,
+            half_width: v.width / 2.0,
+            margin: self.cfg.planner.passage_margin,
+        }
+    }
+
+    /// What paths through passages are planned with: the car's half width plus the
+    /// passage margin as the circle, and the rectangle at the local goal.
+    fn narrow(&self) -> Clearance {
+        let footprint = self.footprint();
+        Clearance {
+            r0: footprint.half_width + footprint.margin,
+            footprint: Some(footprint),
+        }
     }
 
     /// The planning problem towards `goal` from `pose` at `now`, in the frame from the
-    /// car's place on the route (`here`) to the goal; and whether an obstacle moves.
+    /// car's place on the route (`here`) to the goal, with `r0` as the car's circle
+    /// (margin included); and whether an obstacle moves.
     fn problem(
         &self,
         now: f64,
@@ -181,6 +220,7 @@ impl Navigator {
         obstacles: &[Circle],
         here: &RoutePoint,
         goal: &RoutePoint,
+        r0: f64,
     ) -> (PlanProblem, PathFrame, bool) {
         let frame = PathFrame::new((here.x, here.y), (goal.x, goal.y));
         let max_heading = if goal.s < self.route.length() {
@@ -193,7 +233,6 @@ impl Navigator {
         let pc = &self.cfg.planner;
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let span = frame.length - px;
-        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
         let mut any_moving = false;
         let problem = PlanProblem {
             state: planner::VehicleState {
@@ -249,22 +288,44 @@ impl Navigator {
     }
 
     /// The planning problem for a replanning from `pose` at `now`: towards the local
-    /// goal, with the detours to try if it has no feasible path.
+    /// goal, with the detours to try if it has no feasible path, and the same through
+    /// passages narrower than the planning circle.
     pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
         let s = self.progress_at(pose);
         let here = self.route.at(s);
-        let goal = self.local_goal(s, obstacles);
-        let (problem, frame, any_moving) = self.problem(now, pose, obstacles, &here, &goal);
-        let detours = self
-            .detours(s, &goal, obstacles)
-            .iter()
-            .map(|g| {
-                let (p, f, _) = self.problem(now, pose, obstacles, &here, g);
-                (p, f)
-            })
-            .collect();
-        let theta = wrap(pose.theta - frame.angle);
         let pc = &self.cfg.planner;
+        let problems = |goals: &[RoutePoint], r0: f64| -> Vec<(PlanProblem, PathFrame)> {
+            goals
+                .iter()
+                .map(|g| {
+                    let (p, f, _) = self.problem(now, pose, obstacles, &here, g, r0);
+                    (p, f)
+                })
+                .collect()
+        };
+        let wide = self.wide();
+        let goal = search::local_goal(&self.route, pc, &wide, s, obstacles);
+        let (problem, frame, any_moving) =
+            self.problem(now, pose, obstacles, &here, &goal, wide.r0);
+        let detours = problems(
+            &search::detours(&self.route, pc, &wide, s, &goal, obstacles),
+            wide.r0,
+        );
+        let narrow = self.narrow();
+        let through = search::local_goal(&self.route, pc, &narrow, s, obstacles);
+        let mut goals = vec![through];
+        goals.extend(search::detours(
+            &self.route,
+            pc,
+            &narrow,
+            s,
+            &through,
+            obstacles,
+        ));
+        let passages = problems(&goals, narrow.r0);
+        let end = self.route.local_goal(self.route.length());
+        let goal_blocked = !search::clear_of(&end, obstacles, narrow.r0);
+        let theta = wrap(pose.theta - frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let pacing = any_moving.then(|| Pacing {
             speeds: pc
@@ -298,6 +359,9 @@ impl Navigator {
             steer_limit: limit,
             frame,
             detours,
+            passages,
+            footprint: self.footprint(),
+            goal_blocked,
             pacing,
             align,
         }
@@ -326,6 +390,8 @@ impl Navigator {
                 }
                 self.active = trajectory;
                 self.paced = record.moving;
+                self.passage = record.passage;
+                self.goal_blocked = record.goal_blocked;
                 self.aligning = record.align;
                 self.planner_error = None;
                 self.plans.push(record);
@@ -372,9 +438,14 @@ impl Navigator {
             };
         }
         let Some(t) = &self.active else {
-            return Guidance::Stop {
-                reason: "no collision-free path".to_owned(),
+            let reason = if self.goal_blocked {
+                format!(
+                    "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
+                )
+            } else {
+                "no collision-free path".to_owned()
             };
+            return Guidance::Stop { reason };
         };
         let path = t.path();
         let x = px.clamp(path.x_k(), path.x_f());
@@ -397,7 +468,13 @@ impl Navigator {
         } else {
             self.cfg.planner.cruise_speed
         };
+        let passage = if self.passage {
+            self.cfg.planner.passage_speed
+        } else {
+            f64::INFINITY
+        };
         let speed = pace
+            .min(passage)
             .min(
                 self.route
                     .speed_limit(self.progress)
@@ -739,5 +816,136 @@ mod tests {
             .map(|g| nav.route.at(g.s).y.hypot(0.0) + g.y.abs())
             .collect();
         assert!(shifts.windows(2).all(|w| w[0] <= w[1] + 1e-9), "{shifts:?}");
+    }
+}
+
+#[cfg(test)]
+mod passage_tests {
+    use super::*;
+    use crate::perception::{PerceptionConfig, cover_segment};
+
+    /// A fence across the route at x = 20 with a gate `gap` wide centred on it, as
+    /// perception covers it: chains of circles spaced for the passage margin.
+    fn fence(gap: f64, margin: f64) -> Vec<Circle> {
+        let cfg = PerceptionConfig {
+            vehicle_radius: margin,
+            ..PerceptionConfig::default()
+        };
+        [
+            ([20.0, -12.0], [20.0, -gap / 2.0]),
+            ([20.0, gap / 2.0], [20.0, 12.0]),
+        ]
+        .into_iter()
+        .flat_map(|(a, b)| {
+            let (r, centres) = cover_segment(a, b, 0.1, &cfg);
+            centres.into_iter().map(move |c| Circle {
+                x: c[0],
+                y: c[1],
+                radius: r,
+                vx: 0.0,
+                vy: 0.0,
+            })
+        })
+        .collect()
+    }
+
+    #[test]
+    fn a_gate_of_car_width_plus_0_8_m_is_driven_through_slowly() {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 40.0;
+        cfg.mission.goal_y = 0.0;
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = Pose {
+            x: 15.5,
+            y: 0.0,
+            theta: 0.0,
+            v: 2.0,
+            phi: 0.0,
+        };
+        let gate = fence(cfg.vehicle.width + 0.8, cfg.planner.passage_margin);
+        // Progress along the route follows the car tick by tick.
+        for x in 0..=15 {
+            nav.follow(&Pose {
+                x: f64::from(x),
+                ..pose
+            });
+        }
+        let req = nav.request(0.0, &pose, &gate);
+        let outcome = solve(&req);
+        let (trajectory, record) = outcome.result.clone().expect("planned");
+        assert!(trajectory.is_some() && record.passage, "{record:?}");
+        assert!(
+            !record.projected_to_boundary,
+            "straight through: {record:?}"
+        );
+        // The car's rectangle clears both posts of the gate along the whole path.
+        let fp = nav.footprint();
+        let t = trajectory.expect("path");
+        let p = t.path();
+        let obstacles: Vec<planner::Obstacle> = gate.iter().map(planner::Obstacle::from).collect();
+        for j in 0..=100 {
+            let x = p.x_k() + p.span() * f64::from(j) / 100.0;
+            let (wx, wy) = outcome.frame.to_world(x, p.y(x));
+            let heading = outcome.frame.angle + p.heading(x);
+            assert!(fp.clear_at(wx, wy, heading, &obstacles), "at x = {x}");
+        }
+        nav.accept(outcome);
+        match nav.follow(&pose) {
+            Guidance::Drive { speed, .. } => {
+                assert!(speed <= cfg.planner.passage_speed + 1e-12, "{speed}");
+            }
+            other => panic!("expected to drive, got {other:?}"),
+        }
+        // A gate narrower than the car plus the margin on each side: no path.
+        let narrow = fence(cfg.vehicle.width + 0.2, cfg.planner.passage_margin);
+        let (trajectory, record) = solve(&nav.request(0.0, &pose, &narrow))
+            .result
+            .expect("planned");
+        assert!(trajectory.is_none() && !record.feasible, "{record:?}");
+    }
+
+    #[test]
+    fn a_blocked_goal_ends_in_a_stop_that_says_so() {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 12.0;
+        cfg.mission.goal_y = 0.0;
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        // A cart parked on the goal; the car 3.5 m before it, no path further.
+        let cart = Circle {
+            x: 12.3,
+            y: 0.0,
+            radius: 1.3,
+            vx: 0.0,
+            vy: 0.0,
+        };
+        let pose = Pose {
+            x: 8.5,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        for x in 0..=8 {
+            nav.follow(&Pose {
+                x: f64::from(x),
+                ..pose
+            });
+        }
+        let req = nav.request(0.0, &pose, &[cart]);
+        assert!(req.goal_blocked);
+        let outcome = solve(&req);
+        assert!(matches!(&outcome.result, Ok((None, r)) if r.goal_blocked));
+        nav.accept(outcome);
+        match nav.follow(&pose) {
+            Guidance::Stop { reason } => {
+                assert!(
+                    reason.starts_with("goal blocked") && reason.contains("3.5 m"),
+                    "{reason}"
+                );
+            }
+            other => panic!("expected a stop, got {other:?}"),
+        }
+        // Without the cart the goal is free.
+        assert!(!nav.request(0.0, &pose, &[]).goal_blocked);
     }
 }

@@ -4,8 +4,10 @@
 //! has no feasible path: local goals shifted sideways or at half the distance, ordered
 //! by their stated cost.
 
+use super::footprint::Footprint;
 use super::frame::Circle;
 use crate::config::PlannerConfig;
+use crate::planner::Obstacle;
 use crate::route::{Route, RoutePoint};
 
 /// Step of the search for a clear local goal along the route, metres.
@@ -23,6 +25,35 @@ pub(super) fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
         .all(|o| (o.x - p.x).hypot(o.y - p.y) > o.radius + r0)
 }
 
+/// What a local goal must be clear of every static obstacle by: the planning circle of
+/// radius `r0` (the car's circle plus its margin) around the rear axle, on the goal and
+/// on the route before it; in a passage also the car's rectangle at the goal, with the
+/// route's heading there.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Clearance {
+    pub r0: f64,
+    pub footprint: Option<Footprint>,
+}
+
+impl Clearance {
+    /// The planning circle alone (it contains the footprint).
+    pub fn circle(r0: f64) -> Clearance {
+        Clearance {
+            r0,
+            footprint: None,
+        }
+    }
+
+    /// Whether the car at `g` clears every static obstacle.
+    fn goal_clear(&self, g: &RoutePoint, obstacles: &[Circle]) -> bool {
+        clear_of(g, obstacles, self.r0)
+            && self.footprint.is_none_or(|f| {
+                let discs: Vec<Obstacle> = obstacles.iter().map(Obstacle::from).collect();
+                f.clear_at(g.x, g.y, g.heading, &discs)
+            })
+    }
+}
+
 /// The stretch of route before a local goal that must be clear of obstacles, metres.
 const LOCAL_GOAL_APPROACH: f64 = 5.0;
 /// A local goal's heading in its frame is kept within this (y(x) cannot arrive
@@ -34,12 +65,12 @@ pub(super) const MAX_LOCAL_HEADING: f64 = 0.5;
 
 /// The local goal on `route` from progress `s`: `horizon_m` further along the route
 /// (the goal once that near), moved on along the route, or else back towards the car,
-/// until it lies outside every static obstacle grown by `r0`; the nominal one when
-/// none does (the planner then finds no path, and the car stops).
+/// until it and the route before it are clear ([`Clearance`]); the nominal one when
+/// none is (the planner then finds no path, and the car stops).
 pub(super) fn local_goal(
     route: &Route,
     pc: &PlannerConfig,
-    r0: f64,
+    clearance: &Clearance,
     s: f64,
     obstacles: &[Circle],
 ) -> RoutePoint {
@@ -49,9 +80,10 @@ pub(super) fn local_goal(
     // can arrive on it with its heading.
     let clear = |g: &RoutePoint| {
         let n = (LOCAL_GOAL_APPROACH / LOCAL_GOAL_STEP) as usize;
-        (0..=n)
-            .map(|k| route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
-            .all(|p| clear_of(&p, obstacles, r0))
+        clearance.goal_clear(g, obstacles)
+            && (1..=n)
+                .map(|k| route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
+                .all(|p| clear_of(&p, obstacles, clearance.r0))
     };
     let steps = ((end - nominal) / LOCAL_GOAL_STEP).ceil() as usize;
     let back = ((pc.horizon_m - pc.horizon_min_m).max(0.0) / LOCAL_GOAL_STEP) as usize;
@@ -65,14 +97,14 @@ pub(super) fn local_goal(
 
 /// Local goals to try when the first has no feasible path (detours): the first
 /// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
-/// its distance, unshifted and shifted the same; each clear of every static obstacle
-/// grown by `r0`; at most `MAX_DETOURS`. The order is the stated cost, and the first
+/// its distance, unshifted and shifted the same; each clear ([`Clearance`], the goal
+/// itself); at most `MAX_DETOURS`. The order is the stated cost, and the first
 /// with a feasible path wins: the least lateral shift, then the farther goal, then
 /// right before left.
 pub(super) fn detours(
     route: &Route,
     pc: &PlannerConfig,
-    r0: f64,
+    clearance: &Clearance,
     s: f64,
     first: &RoutePoint,
     obstacles: &[Circle],
@@ -93,7 +125,7 @@ pub(super) fn detours(
                 y: base.y + shift * ny,
                 ..base
             };
-            if clear_of(&g, obstacles, r0) {
+            if clearance.goal_clear(&g, obstacles) {
                 tries.push((shift, g));
             }
         }

@@ -238,11 +238,15 @@ fn blob(
 }
 
 /// The circles standing for a wall segment: returns their common radius and their
-/// centres, evenly spaced on p0-p1, both ends included. With h the half thickness,
-/// r = max(`wall_circle_min_radius`, h + `wall_circle_margin`) and r0 =
+/// centres, evenly spaced on p0-p1 with the first and last inset by r - h from its
+/// ends (one circle at the middle when it is shorter than twice that). With h the half
+/// thickness, r = max(`wall_circle_min_radius`, h + `wall_circle_margin`) and r0 =
 /// `vehicle_radius`, the spacing is at most `2 sqrt((r + r0)^2 - (h + r0)^2)`, so the
 /// circles grown by r0 contain every point within h + r0 of the segment (and with
-/// r0 = 0 the circles contain the footprint: every point within h of it).
+/// r0 = 0 the circles contain the footprint: every point within h of it). Near an end,
+/// a point within h + r0 of the segment is within (h + r0) + (r - h) = r + r0 of the
+/// inset end circle, so the inset keeps that, and a wall reaches only h (not r) past
+/// its ends: a gate between two walls stays as wide as it is.
 pub fn cover_segment(
     p0: [f64; 2],
     p1: [f64; 2],
@@ -258,10 +262,18 @@ pub fn cover_segment(
     let big = r + cfg.vehicle_radius;
     let need = h + cfg.vehicle_radius;
     let spacing = 2.0 * ((big - need) * (big + need)).sqrt();
-    let length = (p1[0] - p0[0]).hypot(p1[1] - p0[1]);
-    if !(length > 0.0 && spacing > 0.0 && length.is_finite()) {
+    let full = (p1[0] - p0[0]).hypot(p1[1] - p0[1]);
+    let inset = r - h;
+    if !(full.is_finite() && spacing > 0.0) {
         return (r, vec![p0]);
     }
+    if full <= 2.0 * inset {
+        return (r, vec![[(p0[0] + p1[0]) / 2.0, (p0[1] + p1[1]) / 2.0]]);
+    }
+    let (ux, uy) = ((p1[0] - p0[0]) / full, (p1[1] - p0[1]) / full);
+    let p0 = [p0[0] + inset * ux, p0[1] + inset * uy];
+    let p1 = [p1[0] - inset * ux, p1[1] - inset * uy];
+    let length = full - 2.0 * inset;
     // ceil of a finite positive ratio; bounded so a degenerate config cannot explode.
     let intervals = (length / spacing).ceil().clamp(1.0, 1e5) as usize;
     let centres = (0..=intervals)
@@ -288,8 +300,45 @@ mod tests {
         let s = c[1][0] - c[0][0];
         let waist = ((r + 1.0).powi(2) - (s / 2.0).powi(2)).sqrt();
         assert!(waist >= 1.05 - 1e-12, "waist {waist}");
-        assert_eq!(c.first(), Some(&[0.0, 0.0]));
-        assert_eq!(c.last(), Some(&[10.0, 0.0]));
+        // The ends inset by r - h: the wall reaches h past them, not r.
+        let first = c.first().copied().unwrap_or_default();
+        let last = c.last().copied().unwrap_or_default();
+        assert!(
+            (first[0] - 0.2).abs() < 1e-12 && first[1] == 0.0,
+            "{first:?}"
+        );
+        assert!((last[0] - 9.8).abs() < 1e-12 && last[1] == 0.0, "{last:?}");
+    }
+
+    #[test]
+    fn the_grown_chain_contains_every_point_near_the_segment_ends_included() {
+        let r0 = 0.15;
+        let h = 0.1;
+        let cfg = PerceptionConfig {
+            vehicle_radius: r0,
+            ..PerceptionConfig::default()
+        };
+        for (p1, label) in [([6.0, 3.0], "long"), ([0.2, 0.1], "short")] {
+            let (r, c) = cover_segment([0.0, 0.0], p1, h, &cfg);
+            let len = p1[0].hypot(p1[1]);
+            let (ux, uy) = (p1[0] / len, p1[1] / len);
+            // Points on a grid round the segment, within h + r0 of it.
+            for i in -40..=40 {
+                for j in -40..=40 {
+                    let (a, b) = (f64::from(i) * 0.2, f64::from(j) * 0.02);
+                    let (px, py) = (a * ux - b * uy, a * uy + b * ux);
+                    let t = a.clamp(0.0, len);
+                    let d = (px - t * ux).hypot(py - t * uy);
+                    if d > h + r0 {
+                        continue;
+                    }
+                    let covered = c
+                        .iter()
+                        .any(|q| (px - q[0]).hypot(py - q[1]) <= r + r0 + 1e-9);
+                    assert!(covered, "{label}: ({px}, {py}) at {d} from the segment");
+                }
+            }
+        }
     }
 
     #[test]

@@ -121,6 +121,10 @@ pub struct PlanResult {
 pub struct PlanOptions {
     /// Time sampling of the collision windows and of the clearance diagnostic.
     pub sampling: Sampling,
+    /// Leave out the clearance diagnostic ([`ObstacleReport::min_clearance`] is null):
+    /// guidance, which plans several problems every T_s, does not read it, and it
+    /// costs more than the plan.
+    pub skip_clearance: bool,
 }
 
 /// A planned step with the trajectory a follower needs.
@@ -308,6 +312,7 @@ pub fn plan_with(problem: &PlanProblem, options: &PlanOptions) -> Result<Planned
             goal_collides: c.goal_collides,
             min_clearance: trajectory
                 .as_ref()
+                .filter(|_| !options.skip_clearance)
                 .map(|t| min_clearance(t, o, problem.vehicle_radius, &sampling)),
         })
         .collect();
@@ -316,13 +321,13 @@ pub fn plan_with(problem: &PlanProblem, options: &PlanOptions) -> Result<Planned
         Some(t) => {
             let path = t.path();
             let n = 1000;
-            let (mut kappa, mut phi) = (0.0_f64, 0.0_f64);
+            let mut kappa = 0.0_f64;
             for j in 0..=n {
                 let x = path.x_k() + path.span() * (j as f64 / n as f64);
                 kappa = kappa.max(path.curvature(x).abs());
-                phi = phi.max(path.steering_angle(x).abs());
             }
-            (Some(kappa), Some(phi))
+            // phi = atan(l kappa) is monotonic in |kappa|.
+            (Some(kappa), Some((path.wheelbase() * kappa).atan()))
         }
         None => (None, None),
     };

@@ -120,9 +120,9 @@ impl Default for VehicleConfig {
         let car = ugv_controller::car::PAPER_CAR;
         VehicleConfig {
             wheelbase: car.wheelbase,
-            length: 2.4,
-            width: 1.2,
-            rear_overhang: 0.375,
+            length: car.length,
+            width: car.width,
+            rear_overhang: car.rear_overhang,
             max_steer_deg: car.max_steer_deg,
             max_speed: car.max_speed,
             radius: car.radius,
