@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use golf_car_can::{GolfCarMessage, SteeringReport, ThrottleReport};
+use golf_car_can::{GolfCarMessage, SteeringReport, ThrottleCmd, ThrottleCmdGear, ThrottleReport};
 
 /// The steering is judged over this window, seconds: if its angle moved less than
 /// [`STEER_FROZEN_DEG`] over the window while a command older than [`RESPONSE_S`]
@@ -20,7 +20,7 @@ const STEER_WINDOW_S: f64 = 1.0;
 const RESPONSE_S: f64 = 0.4;
 const STEER_FROZEN_DEG: f64 = 0.3;
 const STEER_OFF_DEG: f64 = 1.5;
-/// The car runs faster than commanded by more than this, m/s...
+/// The car runs faster than commanded (either way) by more than this, m/s...
 const SPEED_OVER: f64 = 0.5;
 /// ...and slows by less than this over [`SPEED_SPAN_S`], m/s...
 const SPEED_FALL: f64 = 0.1;
@@ -41,7 +41,7 @@ pub struct ActuatorFinding {
 pub struct ActuatorMonitor {
     /// (time, enable, target angle deg)
     steer_cmds: VecDeque<(f64, bool, f64)>,
-    /// (time, enable, target speed m/s)
+    /// (time, enable, signed target speed m/s)
     speed_cmds: VecDeque<(f64, bool, f64)>,
     /// (time, wheel speed m/s)
     speeds: VecDeque<(f64, f64)>,
@@ -49,6 +49,16 @@ pub struct ActuatorMonitor {
     angles: VecDeque<(f64, f64)>,
     speed_over_since: Option<f64>,
     finding: Option<ActuatorFinding>,
+}
+
+/// The signed speed a THROTTLE_CMD asks for: its target speed (a magnitude) forwards
+/// in gear F, backwards in gear R, none in neutral, m/s.
+pub fn commanded_speed(c: &ThrottleCmd) -> f64 {
+    match c.gear {
+        ThrottleCmdGear::Forward => c.target_speed,
+        ThrottleCmdGear::Reverse => -c.target_speed,
+        ThrottleCmdGear::Neutral => 0.0,
+    }
 }
 
 /// The newest entry at least `age` old.
@@ -74,7 +84,8 @@ impl ActuatorMonitor {
                     self.steer_cmds.push_back((now, c.enable, c.target_angle));
                 }
                 GolfCarMessage::ThrottleCmd(c) => {
-                    self.speed_cmds.push_back((now, c.enable, c.target_speed));
+                    self.speed_cmds
+                        .push_back((now, c.enable, commanded_speed(c)));
                 }
                 _ => {}
             }
@@ -156,10 +167,10 @@ impl ActuatorMonitor {
             .iter()
             .rev()
             .find(|(t, _)| now - t >= SPEED_SPAN_S)
-            .map(|(_, old)| old - v);
+            .map(|(_, old)| old.abs() - v.abs());
         let over = match (commanded, fall) {
             (Some((true, target)), Some(fall)) if r.enabled => {
-                v > target + SPEED_OVER && fall < SPEED_FALL
+                v.abs() > target.abs() + SPEED_OVER && fall < SPEED_FALL
             }
             _ => false,
         };
