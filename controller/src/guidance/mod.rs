@@ -45,12 +45,22 @@
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within
 //!   `align_exit_deg`.
+//! - Recovery from dead ends: standing still (below [`STANDING`]) with no feasible
+//!   path for `recover_after_s` (a dead end, an obstacle too close ahead to swerve
+//!   round, both turning circles blocked), the car backs `reverse_distance_m` at
+//!   `reverse_speed` in gear R ([`Guidance::Reverse`]) along a straight or gently
+//!   curved arc checked against the obstacles perception reports ([`Reverse`]; the
+//!   laser looks forward, so the way is kept short and slow), stopping early when the
+//!   rest of it is no longer clear, then replans. At most `max_reversals` times per
+//!   mission; then, or with no clear way back, a controlled stop whose reason says so
+//!   ("no forward path after 2 reversals").
 //!
 //! # Files
 //!
 //! `frame` (the world and planning frames), `search` (where a replanning aims: the
 //! local goal and its detours), `pacing` (moving obstacles: the pace and the sweep),
-//! `align` (turning towards the goal first), `solver` (solving a replanning),
+//! `align` (turning towards the goal first), `reverse` (backing out of a dead end),
+//! `solver` (solving a replanning),
 //! `follower` (the steering laws) and `error`; this file keeps the navigator, which
 //! builds the requests, takes the outcomes and follows the path.
 
@@ -59,6 +69,7 @@ mod error;
 mod follower;
 mod frame;
 mod pacing;
+mod reverse;
 mod search;
 mod solver;
 
@@ -67,6 +78,7 @@ pub use error::{GuidanceError, ReplanError};
 pub use follower::{FollowInputs, SteeringLaw};
 pub use frame::{Circle, PathFrame};
 pub use pacing::{Pacing, sweep};
+pub use reverse::Reverse;
 pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
 
 use crate::config::ControllerConfig;
@@ -86,6 +98,13 @@ pub enum Guidance {
         speed: f64,
         inputs: FollowInputs,
     },
+    /// Back out of a dead end in gear R ([`Reverse`]).
+    Reverse {
+        /// Road-wheel angle, radians.
+        steer: f64,
+        /// Speed backwards (a magnitude), m/s; 0 while braking at the end.
+        speed: f64,
+    },
     /// Stop with the steering held: no feasible path (or the planner failed).
     Stop { reason: String },
     /// Within the goal tolerance.
@@ -96,6 +115,8 @@ pub enum Guidance {
 /// for (per call: progress is updated every control tick), metres.
 const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
+/// Below this speed the car stands (for recovery, and at the end of a reversal), m/s.
+pub const STANDING: f64 = 0.05;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -118,6 +139,12 @@ pub struct Navigator {
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
     planner_error: Option<ReplanError>,
+    /// Backing out of a dead end.
+    reversing: Option<Reverse>,
+    /// Reversals begun this mission.
+    reversals: u32,
+    /// The last try at recovery found no clear way back.
+    no_way_back: bool,
     pub plans: Vec<PlanRecord>,
 }
 
@@ -140,6 +167,9 @@ impl Navigator {
             next_replan: 0.0,
             infeasible_since: None,
             planner_error: None,
+            reversing: None,
+            reversals: 0,
+            no_way_back: false,
             plans: Vec::new(),
         })
     }
@@ -303,9 +333,10 @@ impl Navigator {
         }
     }
 
-    /// Whether a replanning is due at `now` from `pose`.
+    /// Whether a replanning is due at `now` from `pose` (not while reversing).
     pub fn replan_due(&self, now: f64, pose: &Pose) -> bool {
         now >= self.next_replan
+            && self.reversing.is_none()
             && self.route.length() - self.progress_at(pose) > self.cfg.planner.final_approach
     }
 
@@ -314,8 +345,13 @@ impl Navigator {
         self.next_replan = now + self.cfg.planner.replan_period_s;
     }
 
-    /// Take a finished replanning: its path is followed from now on.
+    /// Take a finished replanning: its path is followed from now on. One that finishes
+    /// while the car reverses (on a planning thread) was planned from where it stood,
+    /// and is dropped.
     pub fn accept(&mut self, outcome: PlanOutcome) {
+        if self.reversing.is_some() {
+            return;
+        }
         self.frame = outcome.frame;
         match outcome.result {
             Ok((trajectory, record)) => {
@@ -338,6 +374,62 @@ impl Navigator {
         }
     }
 
+    /// Reversals begun so far.
+    pub fn reversals(&self) -> u32 {
+        self.reversals
+    }
+
+    /// Recovery at `now` from `pose` among `obstacles` (every control tick, after
+    /// planning): begin a reversal when the car has stood with no feasible path for
+    /// `recover_after_s` and reversals are left; while reversing, brake once the
+    /// distance is covered or the rest is no longer clear, and replan once standing.
+    pub fn recover(&mut self, now: f64, pose: &Pose, obstacles: &[Circle]) {
+        let pc = &self.cfg.planner;
+        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
+        if let Some(r) = &mut self.reversing {
+            if !r.done {
+                let rest = r.rest(pose.x, pose.y, pose.theta);
+                r.done = rest.distance <= 0.0 || !rest.clear(obstacles, r0);
+            }
+            if r.done && pose.v.abs() < STANDING {
+                self.reversing = None;
+                self.next_replan = now;
+            }
+            return;
+        }
+        let stuck = self.active.is_none()
+            && self.aligning.is_none()
+            && self.planner_error.is_none()
+            && self
+                .infeasible_since
+                .is_some_and(|t| now - t >= pc.recover_after_s)
+            && pose.v.abs() < STANDING;
+        if !stuck || self.reversals >= pc.max_reversals {
+            return;
+        }
+        let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
+        let s = self.progress_at(pose);
+        let towards = self.local_goal(s, obstacles);
+        let towards = (towards.y - pose.y).atan2(towards.x - pose.x);
+        match Reverse::choose(
+            (pose.x, pose.y, pose.theta),
+            towards,
+            pc.reverse_distance_m,
+            self.cfg.vehicle.wheelbase,
+            limit,
+            obstacles,
+            r0,
+        ) {
+            Some(r) => {
+                self.reversing = Some(r);
+                self.reversals += 1;
+                self.infeasible_since = None;
+                self.no_way_back = false;
+            }
+            None => self.no_way_back = true,
+        }
+    }
+
     /// Follow the current path from `pose` (no planning).
     pub fn follow(&mut self, pose: &Pose) -> Guidance {
         let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
@@ -351,6 +443,20 @@ impl Navigator {
             // Past the goal's x without reaching it: the polynomial cannot go back.
             return Guidance::Stop {
                 reason: format!("passed the goal {to_goal:.2} m beside it"),
+            };
+        }
+        if let Some(r) = &self.reversing {
+            let speed = if r.done {
+                0.0
+            } else {
+                self.cfg
+                    .planner
+                    .reverse_speed
+                    .min(self.cfg.vehicle.max_speed)
+            };
+            return Guidance::Reverse {
+                steer: r.steer,
+                speed,
             };
         }
         if let Some(e) = &self.planner_error {
@@ -372,9 +478,19 @@ impl Navigator {
             };
         }
         let Some(t) = &self.active else {
-            return Guidance::Stop {
-                reason: "no collision-free path".to_owned(),
+            let pc = &self.cfg.planner;
+            let reason = if self.reversals > 0 && self.reversals >= pc.max_reversals {
+                let n = self.reversals;
+                format!(
+                    "no forward path after {n} reversal{}",
+                    if n == 1 { "" } else { "s" }
+                )
+            } else if self.no_way_back {
+                "no forward path, and no clear way back".to_owned()
+            } else {
+                "no collision-free path".to_owned()
             };
+            return Guidance::Stop { reason };
         };
         let path = t.path();
         let x = px.clamp(path.x_k(), path.x_f());
