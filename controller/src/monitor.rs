@@ -293,4 +293,41 @@ mod tests {
         let f = m.finding().expect("a stuck drive is found");
         assert!(f.reason.contains("does not follow"), "{}", f.reason);
     }
+
+    #[test]
+    fn reversing_at_the_commanded_speed_is_no_finding_and_running_away_backwards_is() {
+        let reverse = |speed| {
+            GolfCarMessage::ThrottleCmd(ThrottleCmd {
+                enable: true,
+                gear: ThrottleCmdGear::Reverse,
+                brake: 0.0,
+                target_speed: speed,
+                accel_limit: 0.0,
+            })
+        };
+        let report = |v| ThrottleReport {
+            enabled: true,
+            wheel_speed: v,
+            ..ThrottleReport::default()
+        };
+        // Backing at the commanded 0.5 m/s.
+        let mut m = ActuatorMonitor::default();
+        for k in 0..400 {
+            let now = f64::from(k) * 0.01;
+            m.commanded(now, &[reverse(0.5)]);
+            m.on_throttle(now, &report(-0.5));
+        }
+        assert!(m.finding().is_none(), "{:?}", m.finding());
+        // Backing at 1.5 m/s against a command of 0.5: found.
+        let mut m = ActuatorMonitor::default();
+        for k in 0..400 {
+            let now = f64::from(k) * 0.01;
+            m.commanded(now, &[reverse(0.5)]);
+            m.on_throttle(now, &report(-1.5));
+        }
+        let f = m
+            .finding()
+            .expect("a drive running away backwards is found");
+        assert!(f.reason.contains("does not follow"), "{}", f.reason);
+    }
 }

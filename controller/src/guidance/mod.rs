@@ -754,6 +754,147 @@ mod tests {
         assert!(matches!(nav.follow(&aligned), Guidance::Drive { .. }));
     }
 
+    /// A mission east along y = 0 and a wall of posts across it at `wall_x`, from
+    /// y = -25 to 25 (every 0.5 m): too long to go round.
+    fn dead_end(wall_x: f64) -> (ControllerConfig, Vec<Circle>) {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 30.0;
+        cfg.mission.goal_y = 0.0;
+        let wall = (-50..=50)
+            .map(|i| Circle {
+                x: wall_x,
+                y: f64::from(i) * 0.5,
+                radius: 0.3,
+                vx: 0.0,
+                vy: 0.0,
+            })
+            .collect();
+        (cfg, wall)
+    }
+
+    /// Replan at `now` from `pose` when due, recover, follow: as the core's tick does.
+    fn tick(nav: &mut Navigator, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+        if nav.replan_due(now, pose) {
+            nav.issued(now);
+            nav.accept(solve(&nav.request(now, pose, obstacles)));
+        }
+        nav.recover(now, pose, obstacles);
+        nav.follow(pose)
+    }
+
+    #[test]
+    fn a_car_facing_a_wall_reverses_a_bounded_number_of_times_then_stops_with_the_reason() {
+        let (cfg, wall) = dead_end(4.5);
+        let pc = &cfg.planner;
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let mut now = 0.0;
+        for round in 1..=pc.max_reversals {
+            // No forward path: a controlled stop until it has stood recover_after_s.
+            let stand_from = now;
+            loop {
+                let g = tick(&mut nav, now, &pose, &wall);
+                if matches!(g, Guidance::Reverse { .. }) {
+                    break;
+                }
+                assert!(matches!(g, Guidance::Stop { .. }), "{round}: {g:?}");
+                assert!(now - stand_from < pc.recover_after_s + 0.5, "{round}");
+                now += 0.01;
+            }
+            assert!(now - stand_from >= pc.recover_after_s - 1e-9);
+            assert_eq!(nav.reversals(), round);
+            // Straight back at the reverse speed, not replanning meanwhile.
+            assert_eq!(
+                nav.follow(&pose),
+                Guidance::Reverse {
+                    steer: 0.0,
+                    speed: pc.reverse_speed
+                }
+            );
+            while nav.reversing.is_some_and(|r| !r.done) {
+                now += 0.01;
+                pose.x -= pc.reverse_speed * 0.01;
+                pose.v = -pc.reverse_speed;
+                assert!(!nav.replan_due(now, &pose));
+                nav.recover(now, &pose, &wall);
+                assert!(pose.x > -(pc.reverse_distance_m + 0.1) * f64::from(round));
+            }
+            assert!(
+                pose.x < -(pc.reverse_distance_m - 0.1) * f64::from(round),
+                "{}",
+                pose.x
+            );
+            // Braking to a stand, then replanning at once.
+            assert!(matches!(
+                nav.follow(&pose),
+                Guidance::Reverse { speed: 0.0, .. }
+            ));
+            pose.v = 0.0;
+            nav.recover(now, &pose, &wall);
+            assert!(nav.reversing.is_none() && nav.replan_due(now, &pose));
+        }
+        // Out of reversals: a controlled stop that says why, held.
+        for _ in 0..300 {
+            now += 0.01;
+            let g = tick(&mut nav, now, &pose, &wall);
+            assert_eq!(
+                g,
+                Guidance::Stop {
+                    reason: format!("no forward path after {} reversals", pc.max_reversals)
+                }
+            );
+        }
+        assert_eq!(nav.reversals(), pc.max_reversals);
+    }
+
+    #[test]
+    fn a_blocked_way_back_is_not_taken_and_a_clear_forward_path_needs_no_reversal() {
+        let (cfg, mut walls) = dead_end(4.5);
+        // A second wall 4 m behind the car: backing up would hit it.
+        let (_, behind) = dead_end(-4.0);
+        walls.extend(behind);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        for k in 0..300 {
+            let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &walls);
+            assert!(matches!(g, Guidance::Stop { .. }), "{g:?}");
+        }
+        assert_eq!(nav.reversals(), 0);
+        assert_eq!(
+            nav.follow(&pose),
+            Guidance::Stop {
+                reason: "no forward path, and no clear way back".to_owned()
+            }
+        );
+        // A car that is merely moving when its path goes infeasible does not reverse.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let rolling = Pose { v: 0.5, ..pose };
+        let (_, ahead) = dead_end(4.5);
+        for k in 0..300 {
+            tick(&mut nav, f64::from(k) * 0.01, &rolling, &ahead);
+        }
+        assert_eq!(nav.reversals(), 0);
+        // With the way open, it drives forwards and never reverses.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        for k in 0..300 {
+            let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &[]);
+            assert!(matches!(g, Guidance::Drive { .. }), "{g:?}");
+        }
+        assert_eq!(nav.reversals(), 0);
+    }
+
     fn long_route() -> ControllerConfig {
         let mut cfg = ControllerConfig::default();
         cfg.mission.waypoints = vec![crate::route::Waypoint {
