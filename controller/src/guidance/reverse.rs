@@ -34,7 +34,6 @@ impl Reverse {
     /// back, else a gentle arc (half the planned steering limit `steer_limit`) that
     /// turns the nose towards the world angle `towards`, else the other; None when
     /// none is clear of every obstacle grown by `r0` ([`Reverse::clear`]).
-    #[allow(clippy::too_many_arguments)]
     pub fn choose(
         (x, y, theta): (f64, f64, f64),
         towards: f64,
