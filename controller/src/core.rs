@@ -71,7 +71,8 @@ pub enum Mode {
     WaitingForSensors,
     /// Heartbeat auto, the enable edge sent, waiting for both ECUs to report enabled.
     Enabling { since: f64 },
-    /// Driving the mission (or holding a controlled stop when no path is free).
+    /// Driving the mission (or backing out of a dead end, or holding a controlled stop
+    /// when no path is free).
     Auto,
     /// Within the goal tolerance: braking to a stop, then idle.
     Arrived { stopped: bool },

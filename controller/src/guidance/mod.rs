@@ -854,7 +854,7 @@ mod tests {
     }
 
     #[test]
-    fn a_blocked_way_back_is_not_taken_and_a_clear_forward_path_needs_no_reversal() {
+    fn a_blocked_way_back_is_not_taken_nor_followed_and_a_clear_forward_path_needs_no_reversal() {
         let (cfg, mut walls) = dead_end(4.5);
         // A second wall 4 m behind the car: backing up would hit it.
         let (_, behind) = dead_end(-4.0);
@@ -878,10 +878,32 @@ mod tests {
                 reason: "no forward path, and no clear way back".to_owned()
             }
         );
+        // The wall behind shows up only once the car backs: it brakes at once.
+        let (_, ahead) = dead_end(4.5);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut now = 0.0;
+        while !matches!(tick(&mut nav, now, &pose, &ahead), Guidance::Reverse { .. }) {
+            now += 0.01;
+            assert!(now < 3.0, "it reverses");
+        }
+        let backing = Pose {
+            x: -0.5,
+            v: -cfg.planner.reverse_speed,
+            ..pose
+        };
+        nav.recover(now + 1.0, &backing, &ahead);
+        assert!(matches!(
+            nav.follow(&backing),
+            Guidance::Reverse { speed, .. } if speed > 0.0
+        ));
+        nav.recover(now + 1.01, &backing, &walls);
+        assert!(matches!(
+            nav.follow(&backing),
+            Guidance::Reverse { speed: 0.0, .. }
+        ));
         // A car that is merely moving when its path goes infeasible does not reverse.
         let mut nav = Navigator::new(&cfg).expect("navigator");
         let rolling = Pose { v: 0.5, ..pose };
-        let (_, ahead) = dead_end(4.5);
         for k in 0..300 {
             tick(&mut nav, f64::from(k) * 0.01, &rolling, &ahead);
         }
