@@ -111,6 +111,15 @@ pub struct PlannerConfig {
     pub align_exit_deg: f64,
     /// Speed of that turn, m/s.
     pub align_speed: f64,
+    /// Recovery: standing still with no feasible forward path for this long, the car
+    /// reverses along a checked path and replans, seconds.
+    pub recover_after_s: f64,
+    /// Length of one reversal (the rear axle's arc), metres.
+    pub reverse_distance_m: f64,
+    /// Speed of a reversal (a magnitude: THROTTLE_CMD in gear R), m/s.
+    pub reverse_speed: f64,
+    /// Reversals per mission; then (or with no clear path backwards) a controlled stop.
+    pub max_reversals: u32,
 }
 
 impl Default for PlannerConfig {
@@ -132,6 +141,10 @@ impl Default for PlannerConfig {
             align_enter_deg: 65.0,
             align_exit_deg: 30.0,
             align_speed: 1.0,
+            recover_after_s: 1.0,
+            reverse_distance_m: 4.0,
+            reverse_speed: 0.5,
+            max_reversals: 2,
         }
     }
 }
@@ -332,18 +345,6 @@ impl ControllerConfig {
             v.length,
             "m (up to length)",
         )?;
-        let corner = (v.length - v.rear_overhang)
-            .max(v.rear_overhang)
-            .hypot(v.width / 2.0);
-        if corner > v.radius + self.planner.safety_margin {
-            return Err(FieldError::new(
-                at("radius"),
-                format!(
-                    "{} plus planner.safety_margin {} must contain the footprint (its farthest corner is {corner:.2} m from the rear axle)",
-                    v.radius, self.planner.safety_margin
-                ),
-            ));
-        }
         for (k, x) in [
             ("antenna_x", v.antenna_x),
             ("antenna_y", v.antenna_y),
@@ -366,6 +367,18 @@ impl ControllerConfig {
             "m (up to horizon_m)",
         )?;
         within(&at("safety_margin"), pc.safety_margin, 0.0, 5.0, "m")?;
+        let corner = (v.length - v.rear_overhang)
+            .max(v.rear_overhang)
+            .hypot(v.width / 2.0);
+        if corner > v.radius + self.planner.safety_margin {
+            return Err(FieldError::new(
+                FieldPath::of(&["vehicle", "radius"]),
+                format!(
+                    "{} plus planner.safety_margin {} must contain the footprint (its farthest corner is {corner:.2} m from the rear axle)",
+                    v.radius, self.planner.safety_margin
+                ),
+            ));
+        }
         within(&at("passage_margin"), pc.passage_margin, 0.0, 5.0, "m")?;
         positive_up_to(
             &at("passage_speed"),
@@ -433,6 +446,25 @@ impl ControllerConfig {
                 ),
             ));
         }
+        positive_up_to(&at("recover_after_s"), pc.recover_after_s, 60.0, "s")?;
+        positive_up_to(&at("reverse_distance_m"), pc.reverse_distance_m, 10.0, "m")?;
+        positive_up_to(&at("reverse_speed"), pc.reverse_speed, 2.0, "m/s")?;
+        if pc.reverse_speed > v.max_speed {
+            return Err(FieldError::new(
+                at("reverse_speed"),
+                format!(
+                    "{} exceeds vehicle.max_speed {}",
+                    pc.reverse_speed, v.max_speed
+                ),
+            ));
+        }
+        within(
+            &at("max_reversals"),
+            f64::from(pc.max_reversals),
+            0.0,
+            10.0,
+            "",
+        )?;
 
         let f = &self.follower;
         let at = |k: &'static str| FieldPath::of(&["follower", k]);

@@ -71,7 +71,8 @@ pub enum Mode {
     WaitingForSensors,
     /// Heartbeat auto, the enable edge sent, waiting for both ECUs to report enabled.
     Enabling { since: f64 },
-    /// Driving the mission (or holding a controlled stop when no path is free).
+    /// Driving the mission (or backing out of a dead end, or holding a controlled stop
+    /// when no path is free).
     Auto,
     /// Within the goal tolerance: braking to a stop, then idle.
     Arrived { stopped: bool },
@@ -250,9 +251,11 @@ impl Controller {
         }
     }
 
-    /// Replan if due, then follow the current plan from `pose`.
+    /// Replan if due, recover from a dead end if stuck in one, then follow the current
+    /// plan (or reversal) from `pose`.
     fn plan_and_follow(&mut self, now: f64, pose: &Pose) -> Guidance {
         self.plan(now, pose);
+        self.nav.recover(now, pose, &self.obstacles);
         self.nav.follow(pose)
     }
 
@@ -515,6 +518,8 @@ impl Controller {
 
         // What to ask of the actuators.
         let hold = self.measured_angle();
+        // Forward, but for a reversal.
+        let mut gear = ThrottleCmdGear::Forward;
         // (heartbeat, (steering enable, angle deg), (throttle enable, speed, brake %))
         let (state, steer, drive): (ControllerHeartbeatState, (bool, f64), (bool, f64, f64)) =
             match self.mode.clone() {
@@ -557,6 +562,16 @@ impl Controller {
                                 ControllerHeartbeatState::Auto,
                                 (true, steer_deg),
                                 (true, speed, 0.0),
+                            )
+                        }
+                        Guidance::Reverse { steer, speed } => {
+                            self.stop_reason = None;
+                            gear = ThrottleCmdGear::Reverse;
+                            let steer_deg = steer.to_degrees().clamp(-limit, limit);
+                            (
+                                ControllerHeartbeatState::Auto,
+                                (true, steer_deg),
+                                (true, speed.clamp(0.0, v.max_speed.min(10.0)), 0.0),
                             )
                         }
                         Guidance::Stop { reason } => {
@@ -617,7 +632,7 @@ impl Controller {
             }));
             out.push(GolfCarMessage::ThrottleCmd(ThrottleCmd {
                 enable: drive.0,
-                gear: ThrottleCmdGear::Forward,
+                gear,
                 brake: drive.2.clamp(0.0, 100.0),
                 target_speed: drive.1.clamp(0.0, v.max_speed.min(10.0)),
                 accel_limit: self.cfg.follower.accel_limit.clamp(0.0, 5.0),

@@ -39,7 +39,7 @@ use firmware_bridge::Received;
 use golf_car_can::{
     CanMessage, ControllerHeartbeat, CounterVerdict, E2eError, FaultReportCode, FaultReportSource,
     GolfCarMessage, SenderWatch, SteeringCmd, SteeringReport, SteeringReportFault, ThrottleCmd,
-    ThrottleCmdGear, ThrottleReport, ThrottleReportFault,
+    ThrottleReport, ThrottleReportFault,
 };
 use serde::Serialize;
 
@@ -214,11 +214,7 @@ impl ActuationWatch {
                     self.steering.push(now, c.enable, t, STEER_WINDOW);
                 }
                 GolfCarMessage::ThrottleCmd(c) => {
-                    let speed = match c.gear {
-                        ThrottleCmdGear::Forward => c.target_speed,
-                        ThrottleCmdGear::Reverse => -c.target_speed,
-                        ThrottleCmdGear::Neutral => 0.0,
-                    };
+                    let speed = crate::monitor::commanded_speed(c);
                     self.throttle.push(now, c.enable, speed, SPEED_WINDOW);
                 }
                 _ => {}
@@ -385,6 +381,7 @@ impl ActuationWatch {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use golf_car_can::ThrottleCmdGear;
 
     /// A first-order actuator with dead time and a rate limit, as a healthy ECU is
     /// (the simulator's ECUs, and the disturbance scenarios' slow ones).

@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use golf_car_can::{GolfCarMessage, SteeringReport, ThrottleReport};
+use golf_car_can::{GolfCarMessage, SteeringReport, ThrottleCmd, ThrottleCmdGear, ThrottleReport};
 
 /// The steering is judged over this window, seconds: if its angle moved less than
 /// [`STEER_FROZEN_DEG`] over the window while a command older than [`RESPONSE_S`]
@@ -20,7 +20,7 @@ const STEER_WINDOW_S: f64 = 1.0;
 const RESPONSE_S: f64 = 0.4;
 const STEER_FROZEN_DEG: f64 = 0.3;
 const STEER_OFF_DEG: f64 = 1.5;
-/// The car runs faster than commanded by more than this, m/s...
+/// The car runs faster than commanded (either way) by more than this, m/s...
 const SPEED_OVER: f64 = 0.5;
 /// ...and slows by less than this over [`SPEED_SPAN_S`], m/s...
 const SPEED_FALL: f64 = 0.1;
@@ -41,7 +41,7 @@ pub struct ActuatorFinding {
 pub struct ActuatorMonitor {
     /// (time, enable, target angle deg)
     steer_cmds: VecDeque<(f64, bool, f64)>,
-    /// (time, enable, target speed m/s)
+    /// (time, enable, signed target speed m/s)
     speed_cmds: VecDeque<(f64, bool, f64)>,
     /// (time, wheel speed m/s)
     speeds: VecDeque<(f64, f64)>,
@@ -49,6 +49,16 @@ pub struct ActuatorMonitor {
     angles: VecDeque<(f64, f64)>,
     speed_over_since: Option<f64>,
     finding: Option<ActuatorFinding>,
+}
+
+/// The signed speed a THROTTLE_CMD asks for: its target speed (a magnitude) forwards
+/// in gear F, backwards in gear R, none in neutral, m/s.
+pub fn commanded_speed(c: &ThrottleCmd) -> f64 {
+    match c.gear {
+        ThrottleCmdGear::Forward => c.target_speed,
+        ThrottleCmdGear::Reverse => -c.target_speed,
+        ThrottleCmdGear::Neutral => 0.0,
+    }
 }
 
 /// The newest entry at least `age` old.
@@ -74,7 +84,8 @@ impl ActuatorMonitor {
                     self.steer_cmds.push_back((now, c.enable, c.target_angle));
                 }
                 GolfCarMessage::ThrottleCmd(c) => {
-                    self.speed_cmds.push_back((now, c.enable, c.target_speed));
+                    self.speed_cmds
+                        .push_back((now, c.enable, commanded_speed(c)));
                 }
                 _ => {}
             }
@@ -156,10 +167,10 @@ impl ActuatorMonitor {
             .iter()
             .rev()
             .find(|(t, _)| now - t >= SPEED_SPAN_S)
-            .map(|(_, old)| old - v);
+            .map(|(_, old)| old.abs() - v.abs());
         let over = match (commanded, fall) {
             (Some((true, target)), Some(fall)) if r.enabled => {
-                v > target + SPEED_OVER && fall < SPEED_FALL
+                v.abs() > target.abs() + SPEED_OVER && fall < SPEED_FALL
             }
             _ => false,
         };
@@ -280,6 +291,43 @@ mod tests {
             m.on_throttle(now, &report(2.0));
         }
         let f = m.finding().expect("a stuck drive is found");
+        assert!(f.reason.contains("does not follow"), "{}", f.reason);
+    }
+
+    #[test]
+    fn reversing_at_the_commanded_speed_is_no_finding_and_running_away_backwards_is() {
+        let reverse = |speed| {
+            GolfCarMessage::ThrottleCmd(ThrottleCmd {
+                enable: true,
+                gear: ThrottleCmdGear::Reverse,
+                brake: 0.0,
+                target_speed: speed,
+                accel_limit: 0.0,
+            })
+        };
+        let report = |v| ThrottleReport {
+            enabled: true,
+            wheel_speed: v,
+            ..ThrottleReport::default()
+        };
+        // Backing at the commanded 0.5 m/s.
+        let mut m = ActuatorMonitor::default();
+        for k in 0..400 {
+            let now = f64::from(k) * 0.01;
+            m.commanded(now, &[reverse(0.5)]);
+            m.on_throttle(now, &report(-0.5));
+        }
+        assert!(m.finding().is_none(), "{:?}", m.finding());
+        // Backing at 1.5 m/s against a command of 0.5: found.
+        let mut m = ActuatorMonitor::default();
+        for k in 0..400 {
+            let now = f64::from(k) * 0.01;
+            m.commanded(now, &[reverse(0.5)]);
+            m.on_throttle(now, &report(-1.5));
+        }
+        let f = m
+            .finding()
+            .expect("a drive running away backwards is found");
         assert!(f.reason.contains("does not follow"), "{}", f.reason);
     }
 }

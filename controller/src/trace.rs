@@ -28,6 +28,12 @@ pub struct Trace {
     /// went out (the binary on the wires; empty in SIL).
     #[serde(default)]
     pub fix_timing: Vec<FixTiming>,
+    /// The reason of the controlled stop guidance held at the end, if it held one.
+    #[serde(default)]
+    pub stop_reason: Option<String>,
+    /// Reversals out of dead ends.
+    #[serde(default)]
+    pub reversals: u32,
 }
 
 /// One GPS fix through the controller, on the machine's monotonic clock
@@ -67,6 +73,10 @@ pub struct StateRecord {
     pub t: f64,
     pub mode: Mode,
     pub obstacles: Vec<Circle>,
+    #[serde(default)]
+    pub stop_reason: Option<String>,
+    #[serde(default)]
+    pub reversals: u32,
 }
 
 /// One line of a JSON Lines trace.
@@ -102,6 +112,8 @@ impl Trace {
             plans: ctl.nav.plans.clone(),
             obstacles: ctl.obstacles().to_vec(),
             fix_timing: Vec::new(),
+            stop_reason: ctl.stop_reason().map(str::to_owned),
+            reversals: ctl.nav.reversals(),
         }
     }
 
@@ -144,6 +156,8 @@ impl Trace {
             plans,
             obstacles: state.obstacles,
             fix_timing,
+            stop_reason: state.stop_reason,
+            reversals: state.reversals,
         })
     }
 
@@ -233,6 +247,8 @@ impl<W: Write> TraceWriter<W> {
                 t: now,
                 mode: ctl.mode().clone(),
                 obstacles: ctl.obstacles().to_vec(),
+                stop_reason: ctl.stop_reason().map(str::to_owned),
+                reversals: ctl.nav.reversals(),
             }))?;
             self.flush()?;
             self.last_flush = now;

@@ -133,3 +133,25 @@ fn the_default_configuration_and_a_full_file_pass() {
     let text = toml::to_string(&ControllerConfig::default()).expect("encodes");
     ControllerConfig::from_toml(&text, "full.toml").expect("the default written out is valid");
 }
+
+#[test]
+fn the_recovery_fields_are_bounded() {
+    for (key, value) in [
+        ("recover_after_s", "0.0"),
+        ("reverse_distance_m", "-1.0"),
+        ("reverse_distance_m", "12.0"),
+        ("reverse_speed", "0.0"),
+        ("max_reversals", "11"),
+    ] {
+        let e = refused(&format!("[planner]\n{key} = {value}\n"));
+        assert_eq!(e.field, format!("planner.{key}"), "{e}");
+    }
+    // Backing faster than the car may drive at all.
+    let e = refused(
+        "[vehicle]\nmax_speed = 0.4\n[planner]\nreverse_speed = 0.5\ncruise_speed = 0.3\nalign_speed = 0.3\npassage_speed = 0.3\n",
+    );
+    assert_eq!(e.field, "planner.reverse_speed", "{e}");
+    assert!(e.to_string().contains("exceeds vehicle.max_speed"), "{e}");
+    // Recovery off is allowed.
+    assert!(ControllerConfig::from_toml("[planner]\nmax_reversals = 0\n", "c.toml").is_ok());
+}

@@ -2,6 +2,7 @@
 //! waits for its sensors, sends the enable edge, drives, and goes to estop (heartbeat
 //! estop, ECUs disabled with full brake, FAULT_REPORT) on laser silence, a silent ECU
 //! report, an actuator fault or a lost GPS fix; no command ever leaves its limits.
+//! Facing a dead end it backs out in gear R without tripping its own watches.
 
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::expect_used)]
@@ -11,7 +12,7 @@ use firmware_bridge::geodesy::{Enu, LocalFrame, theta_to_course_deg};
 use firmware_bridge::nmea::{FixQuality, GpsReading};
 use golf_car_can::{
     ControllerHeartbeatState, FaultReportCode, GolfCarMessage, SteeringReport, SteeringReportFault,
-    ThrottleReport, ThrottleReportFault, ThrottleReportGear,
+    ThrottleCmdGear, ThrottleReport, ThrottleReportFault, ThrottleReportGear,
 };
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::core::{Controller, Mode};
@@ -226,6 +227,57 @@ fn waits_for_sensors_then_enables_with_an_edge_and_drives() {
         .expect("an enable edge");
     assert!(bits[edge + 1..].iter().all(|b| *b));
     assert_eq!(rig.last_heartbeat(), Some(ControllerHeartbeatState::Auto));
+    rig.assert_limits();
+}
+
+#[test]
+fn a_car_in_a_dead_end_commands_gear_reverse_and_stays_in_auto() {
+    let mut rig = Rig::new();
+    // Returns 3 m from the laser over the whole front half: a cup round the nose.
+    for (i, r) in rig.ranges.iter_mut().enumerate() {
+        let angle = -135.0 + 0.5 * i as f64;
+        if angle.abs() <= 90.0 {
+            *r = 3.0;
+        }
+    }
+    rig.drive();
+    let throttle = |out: &[GolfCarMessage]| {
+        out.iter()
+            .filter_map(|m| match m {
+                GolfCarMessage::ThrottleCmd(c) => Some(*c),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+    assert!(
+        throttle(&rig.out)
+            .iter()
+            .all(|c| c.gear == ThrottleCmdGear::Forward)
+    );
+    let from = rig.out.len();
+    rig.run(1.0, 1.0 + rig.cfg.planner.recover_after_s + 1.0, ALL);
+    let pc = &rig.cfg.planner;
+    let cmds = throttle(&rig.out[from..]);
+    let reversing: Vec<_> = cmds
+        .iter()
+        .filter(|c| c.gear == ThrottleCmdGear::Reverse)
+        .collect();
+    assert!(!reversing.is_empty(), "{:?}", rig.ctl.stop_reason());
+    assert!(
+        reversing
+            .iter()
+            .all(|c| c.enable && c.brake == 0.0 && c.target_speed == pc.reverse_speed),
+        "{reversing:?}"
+    );
+    // Forward until it had stood recover_after_s with no path, then gear R.
+    let first = cmds
+        .iter()
+        .position(|c| c.gear == ThrottleCmdGear::Reverse)
+        .expect("reverse");
+    assert!(first > 0 && cmds[..first].iter().all(|c| c.target_speed == 0.0));
+    assert_eq!(rig.ctl.mode(), &Mode::Auto, "no watch took it for a fault");
+    assert_eq!(rig.ctl.stop_reason(), None);
+    assert_eq!(rig.ctl.nav.reversals(), 1);
     rig.assert_limits();
 }
 

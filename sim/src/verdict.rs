@@ -25,6 +25,11 @@ pub struct ControllerSummary {
     pub steering_effort_deg_s: f64,
     pub replans: usize,
     pub infeasible_replans: usize,
+    /// The reason of the controlled stop guidance held at the end, if it held one
+    /// ("no forward path after 2 reversals").
+    pub stop_reason: Option<String>,
+    /// Reversals out of dead ends.
+    pub reversals: u32,
 }
 
 /// The verdict of one run.
@@ -182,6 +187,8 @@ impl Verdict {
             steering_effort_deg_s: steering_effort(t),
             replans: t.plans.len(),
             infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
+            stop_reason: t.stop_reason.clone(),
+            reversals: t.reversals,
         });
         Verdict {
             mode,

@@ -1,6 +1,7 @@
 //! SIL runs of whole scenarios: the controller library in lockstep with the simulator
 //! through the same codecs. The paper's scenario reaches its goal without collision,
-//! a run is deterministic for a seed, and the safety stops work.
+//! a run is deterministic for a seed, the safety stops work, and a dead end is backed
+//! out of (or ends in a controlled stop that says why).
 
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::expect_used)]
@@ -269,4 +270,78 @@ fn a_car_facing_away_from_the_goal_turns_round_and_arrives() {
             .iter()
             .any(|p| p.feasible && p.align.is_none())
     );
+}
+
+/// A suite scenario run in SIL with `max_reversals` (None: the default): its verdict
+/// and the least wheel speed on the way (negative when it reversed), m/s.
+fn recovery_run(file: &str, max_reversals: Option<u32>) -> (Verdict, f64) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite");
+    let sc = Scenario::load(&dir.join(file)).expect("scenario");
+    let mut cfg = controller_config(&sc, FollowerKind::Optimal);
+    if let Some(n) = max_reversals {
+        cfg.planner.max_reversals = n;
+    }
+    let run = run_sil(sc.clone(), &cfg).expect("SIL run");
+    let slowest = run
+        .sim
+        .trajectory
+        .iter()
+        .map(|(_, s)| s.v)
+        .fold(f64::INFINITY, f64::min);
+    let v = Verdict::judge(
+        Mode::Sil,
+        &sc,
+        run.sim.report(run.outcome),
+        Some(&run.trace),
+    );
+    (v, slowest)
+}
+
+/// Issue 15, recovery: a cul-de-sac is backed out of twice, then ends in a controlled
+/// stop whose reason reaches the verdict.
+#[test]
+fn a_cul_de_sac_ends_in_a_controlled_stop_after_two_reversals() {
+    let (v, slowest) = recovery_run("50-cul-de-sac.toml", None);
+    assert!(
+        v.passed && !v.goal_reached && !v.collision,
+        "{:?}",
+        v.failures
+    );
+    let c = v.controller.expect("controller summary");
+    assert_eq!(c.reversals, 2);
+    assert_eq!(
+        c.stop_reason.as_deref(),
+        Some("no forward path after 2 reversals")
+    );
+    assert!(slowest < -0.3, "it backed: {slowest}");
+    assert!(
+        v.report.final_state.v.abs() < 0.05,
+        "{:?}",
+        v.report.final_state
+    );
+}
+
+/// Issue 15, recovery: with no room to swerve (a cart close ahead, the nose in a dead
+/// end) the car backs off in gear R and then reaches the goal; without reversals it
+/// would stand where it started.
+#[test]
+fn too_close_to_swerve_the_car_backs_off_and_arrives_and_without_reversals_it_stands() {
+    for file in ["51-dead-end-way-back.toml", "52-too-close-ahead.toml"] {
+        let (v, slowest) = recovery_run(file, None);
+        assert!(v.passed && v.goal_reached, "{file}: {:?}", v.failures);
+        let c = v.controller.expect("controller summary");
+        assert!(c.reversals >= 1, "{file}");
+        assert!(slowest < -0.3, "{file}: it backed: {slowest}");
+        assert!(
+            v.report.min_clearance.iter().all(|c| *c > 0.3),
+            "{file}: {:?}",
+            v.report.min_clearance
+        );
+        let (stuck, slowest) = recovery_run(file, Some(0));
+        assert!(!stuck.goal_reached && !stuck.collision, "{file}");
+        assert!(slowest > -0.05, "{file}: never backed: {slowest}");
+        let c = stuck.controller.expect("controller summary");
+        assert_eq!(c.reversals, 0);
+        assert_eq!(c.stop_reason.as_deref(), Some("no collision-free path"));
+    }
 }

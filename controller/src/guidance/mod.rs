@@ -45,12 +45,22 @@
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within
 //!   `align_exit_deg`.
+//! - Recovery from dead ends: standing still (below [`STANDING`]) with no feasible
+//!   path for `recover_after_s` (a dead end, an obstacle too close ahead to swerve
+//!   round, both turning circles blocked), the car backs `reverse_distance_m` at
+//!   `reverse_speed` in gear R ([`Guidance::Reverse`]) along a straight or gently
+//!   curved arc checked against the obstacles perception reports ([`Reverse`]; the
+//!   laser looks forward, so the way is kept short and slow), stopping early when the
+//!   rest of it is no longer clear, then replans. At most `max_reversals` times per
+//!   mission; then, or with no clear way back, a controlled stop whose reason says so
+//!   ("no forward path after 2 reversals").
 //!
 //! # Files
 //!
 //! `frame` (the world and planning frames), `search` (where a replanning aims: the
 //! local goal and its detours), `pacing` (moving obstacles: the pace and the sweep),
-//! `align` (turning towards the goal first), `solver` (solving a replanning),
+//! `align` (turning towards the goal first), `reverse` (backing out of a dead end),
+//! `solver` (solving a replanning),
 //! `follower` (the steering laws) and `error`; this file keeps the navigator, which
 //! builds the requests, takes the outcomes and follows the path.
 
@@ -60,6 +70,7 @@ mod follower;
 mod footprint;
 mod frame;
 mod pacing;
+mod reverse;
 mod search;
 mod solver;
 
@@ -69,6 +80,7 @@ pub use follower::{FollowInputs, SteeringLaw};
 pub use footprint::Footprint;
 pub use frame::{Circle, PathFrame};
 pub use pacing::{Pacing, sweep};
+pub use reverse::Reverse;
 pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
 
 use crate::config::ControllerConfig;
@@ -88,6 +100,13 @@ pub enum Guidance {
         speed: f64,
         inputs: FollowInputs,
     },
+    /// Back out of a dead end in gear R ([`Reverse`]).
+    Reverse {
+        /// Road-wheel angle, radians.
+        steer: f64,
+        /// Speed backwards (a magnitude), m/s; 0 while braking at the end.
+        speed: f64,
+    },
     /// Stop with the steering held: no feasible path (or the planner failed).
     Stop { reason: String },
     /// Within the goal tolerance.
@@ -98,6 +117,8 @@ pub enum Guidance {
 /// for (per call: progress is updated every control tick), metres.
 const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
+/// Below this speed the car stands (for recovery, and at the end of a reversal), m/s.
+pub const STANDING: f64 = 0.05;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -125,6 +146,12 @@ pub struct Navigator {
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
     planner_error: Option<ReplanError>,
+    /// Backing out of a dead end.
+    reversing: Option<Reverse>,
+    /// Reversals begun this mission.
+    reversals: u32,
+    /// The last try at recovery found no clear way back.
+    no_way_back: bool,
     pub plans: Vec<PlanRecord>,
 }
 
@@ -149,6 +176,9 @@ impl Navigator {
             next_replan: 0.0,
             infeasible_since: None,
             planner_error: None,
+            reversing: None,
+            reversals: 0,
+            no_way_back: false,
             plans: Vec::new(),
         })
     }
@@ -367,9 +397,10 @@ impl Navigator {
         }
     }
 
-    /// Whether a replanning is due at `now` from `pose`.
+    /// Whether a replanning is due at `now` from `pose` (not while reversing).
     pub fn replan_due(&self, now: f64, pose: &Pose) -> bool {
         now >= self.next_replan
+            && self.reversing.is_none()
             && self.route.length() - self.progress_at(pose) > self.cfg.planner.final_approach
     }
 
@@ -378,8 +409,13 @@ impl Navigator {
         self.next_replan = now + self.cfg.planner.replan_period_s;
     }
 
-    /// Take a finished replanning: its path is followed from now on.
+    /// Take a finished replanning: its path is followed from now on. One that finishes
+    /// while the car reverses (on a planning thread) was planned from where it stood,
+    /// and is dropped.
     pub fn accept(&mut self, outcome: PlanOutcome) {
+        if self.reversing.is_some() {
+            return;
+        }
         self.frame = outcome.frame;
         match outcome.result {
             Ok((trajectory, record)) => {
@@ -404,6 +440,64 @@ impl Navigator {
         }
     }
 
+    /// Reversals begun so far.
+    pub fn reversals(&self) -> u32 {
+        self.reversals
+    }
+
+    /// Recovery at `now` from `pose` among `obstacles` (every control tick, after
+    /// planning): begin a reversal when the car has stood with no feasible path for
+    /// `recover_after_s` and reversals are left; while reversing, brake once the
+    /// distance is covered or the rest is no longer clear, and replan once standing.
+    pub fn recover(&mut self, now: f64, pose: &Pose, obstacles: &[Circle]) {
+        let pc = &self.cfg.planner;
+        let r0 = self.cfg.vehicle.radius + pc.safety_margin;
+        if let Some(r) = &mut self.reversing {
+            if !r.done {
+                let rest = r.rest(pose.x, pose.y, pose.theta);
+                r.done = rest.distance <= 0.0 || !rest.clear(obstacles, r0);
+            }
+            if r.done && pose.v.abs() < STANDING {
+                self.reversing = None;
+                self.next_replan = now;
+            }
+            return;
+        }
+        // A blocked goal is no dead end: backing away from it leads nowhere nearer.
+        let stuck = self.active.is_none()
+            && !self.goal_blocked
+            && self.aligning.is_none()
+            && self.planner_error.is_none()
+            && self
+                .infeasible_since
+                .is_some_and(|t| now - t >= pc.recover_after_s)
+            && pose.v.abs() < STANDING;
+        if !stuck || self.reversals >= pc.max_reversals {
+            return;
+        }
+        let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
+        let s = self.progress_at(pose);
+        let towards = self.local_goal(s, obstacles);
+        let towards = (towards.y - pose.y).atan2(towards.x - pose.x);
+        match Reverse::choose(
+            (pose.x, pose.y, pose.theta),
+            towards,
+            pc.reverse_distance_m,
+            self.cfg.vehicle.wheelbase,
+            limit,
+            obstacles,
+            r0,
+        ) {
+            Some(r) => {
+                self.reversing = Some(r);
+                self.reversals += 1;
+                self.infeasible_since = None;
+                self.no_way_back = false;
+            }
+            None => self.no_way_back = true,
+        }
+    }
+
     /// Follow the current path from `pose` (no planning).
     pub fn follow(&mut self, pose: &Pose) -> Guidance {
         let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
@@ -417,6 +511,20 @@ impl Navigator {
             // Past the goal's x without reaching it: the polynomial cannot go back.
             return Guidance::Stop {
                 reason: format!("passed the goal {to_goal:.2} m beside it"),
+            };
+        }
+        if let Some(r) = &self.reversing {
+            let speed = if r.done {
+                0.0
+            } else {
+                self.cfg
+                    .planner
+                    .reverse_speed
+                    .min(self.cfg.vehicle.max_speed)
+            };
+            return Guidance::Reverse {
+                steer: r.steer,
+                speed,
             };
         }
         if let Some(e) = &self.planner_error {
@@ -438,10 +546,19 @@ impl Navigator {
             };
         }
         let Some(t) = &self.active else {
+            let pc = &self.cfg.planner;
             let reason = if self.goal_blocked {
                 format!(
                     "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
                 )
+            } else if self.reversals > 0 && self.reversals >= pc.max_reversals {
+                let n = self.reversals;
+                format!(
+                    "no forward path after {n} reversal{}",
+                    if n == 1 { "" } else { "s" }
+                )
+            } else if self.no_way_back {
+                "no forward path, and no clear way back".to_owned()
             } else {
                 "no collision-free path".to_owned()
             };
@@ -713,6 +830,169 @@ mod tests {
         assert!(nav.request(0.0, &aligned, &[]).align.is_none());
         nav.accept(solve(&nav.request(0.0, &aligned, &[])));
         assert!(matches!(nav.follow(&aligned), Guidance::Drive { .. }));
+    }
+
+    /// A mission east along y = 0 and a wall of posts across it at `wall_x`, from
+    /// y = -25 to 25 (every 0.5 m): too long to go round.
+    fn dead_end(wall_x: f64) -> (ControllerConfig, Vec<Circle>) {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 30.0;
+        cfg.mission.goal_y = 0.0;
+        let wall = (-50..=50)
+            .map(|i| Circle {
+                x: wall_x,
+                y: f64::from(i) * 0.5,
+                radius: 0.3,
+                vx: 0.0,
+                vy: 0.0,
+            })
+            .collect();
+        (cfg, wall)
+    }
+
+    /// Replan at `now` from `pose` when due, recover, follow: as the core's tick does.
+    fn tick(nav: &mut Navigator, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+        if nav.replan_due(now, pose) {
+            nav.issued(now);
+            nav.accept(solve(&nav.request(now, pose, obstacles)));
+        }
+        nav.recover(now, pose, obstacles);
+        nav.follow(pose)
+    }
+
+    #[test]
+    fn a_car_facing_a_wall_reverses_a_bounded_number_of_times_then_stops_with_the_reason() {
+        let (cfg, wall) = dead_end(4.5);
+        let pc = &cfg.planner;
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let mut now = 0.0;
+        for round in 1..=pc.max_reversals {
+            // No forward path: a controlled stop until it has stood recover_after_s.
+            let stand_from = now;
+            loop {
+                let g = tick(&mut nav, now, &pose, &wall);
+                if matches!(g, Guidance::Reverse { .. }) {
+                    break;
+                }
+                assert!(matches!(g, Guidance::Stop { .. }), "{round}: {g:?}");
+                assert!(now - stand_from < pc.recover_after_s + 0.5, "{round}");
+                now += 0.01;
+            }
+            assert!(now - stand_from >= pc.recover_after_s - 1e-9);
+            assert_eq!(nav.reversals(), round);
+            // Straight back at the reverse speed, not replanning meanwhile.
+            assert_eq!(
+                nav.follow(&pose),
+                Guidance::Reverse {
+                    steer: 0.0,
+                    speed: pc.reverse_speed
+                }
+            );
+            while nav.reversing.is_some_and(|r| !r.done) {
+                now += 0.01;
+                pose.x -= pc.reverse_speed * 0.01;
+                pose.v = -pc.reverse_speed;
+                assert!(!nav.replan_due(now, &pose));
+                nav.recover(now, &pose, &wall);
+                assert!(pose.x > -(pc.reverse_distance_m + 0.1) * f64::from(round));
+            }
+            assert!(
+                pose.x < -(pc.reverse_distance_m - 0.1) * f64::from(round),
+                "{}",
+                pose.x
+            );
+            // Braking to a stand, then replanning at once.
+            assert!(matches!(
+                nav.follow(&pose),
+                Guidance::Reverse { speed: 0.0, .. }
+            ));
+            pose.v = 0.0;
+            nav.recover(now, &pose, &wall);
+            assert!(nav.reversing.is_none() && nav.replan_due(now, &pose));
+        }
+        // Out of reversals: a controlled stop that says why, held.
+        for _ in 0..300 {
+            now += 0.01;
+            let g = tick(&mut nav, now, &pose, &wall);
+            assert_eq!(
+                g,
+                Guidance::Stop {
+                    reason: format!("no forward path after {} reversals", pc.max_reversals)
+                }
+            );
+        }
+        assert_eq!(nav.reversals(), pc.max_reversals);
+    }
+
+    #[test]
+    fn a_blocked_way_back_is_not_taken_nor_followed_and_a_clear_forward_path_needs_no_reversal() {
+        let (cfg, mut walls) = dead_end(4.5);
+        // A second wall 4 m behind the car: backing up would hit it.
+        let (_, behind) = dead_end(-4.0);
+        walls.extend(behind);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        for k in 0..300 {
+            let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &walls);
+            assert!(matches!(g, Guidance::Stop { .. }), "{g:?}");
+        }
+        assert_eq!(nav.reversals(), 0);
+        assert_eq!(
+            nav.follow(&pose),
+            Guidance::Stop {
+                reason: "no forward path, and no clear way back".to_owned()
+            }
+        );
+        // The wall behind shows up only once the car backs: it brakes at once.
+        let (_, ahead) = dead_end(4.5);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut now = 0.0;
+        while !matches!(tick(&mut nav, now, &pose, &ahead), Guidance::Reverse { .. }) {
+            now += 0.01;
+            assert!(now < 3.0, "it reverses");
+        }
+        let backing = Pose {
+            x: -0.5,
+            v: -cfg.planner.reverse_speed,
+            ..pose
+        };
+        nav.recover(now + 1.0, &backing, &ahead);
+        assert!(matches!(
+            nav.follow(&backing),
+            Guidance::Reverse { speed, .. } if speed > 0.0
+        ));
+        nav.recover(now + 1.01, &backing, &walls);
+        assert!(matches!(
+            nav.follow(&backing),
+            Guidance::Reverse { speed: 0.0, .. }
+        ));
+        // A car that is merely moving when its path goes infeasible does not reverse.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let rolling = Pose { v: 0.5, ..pose };
+        for k in 0..300 {
+            tick(&mut nav, f64::from(k) * 0.01, &rolling, &ahead);
+        }
+        assert_eq!(nav.reversals(), 0);
+        // With the way open, it drives forwards and never reverses.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        for k in 0..300 {
+            let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &[]);
+            assert!(matches!(g, Guidance::Drive { .. }), "{g:?}");
+        }
+        assert_eq!(nav.reversals(), 0);
     }
 
     fn long_route() -> ControllerConfig {
