@@ -21,6 +21,12 @@
 //!   order of their stated cost, each its own Qu et al. polynomial, and the first
 //!   feasible one is taken ([`solve`]).
 //!
+//! - The real footprint: when neither the local goal nor a detour has a path with the
+//!   planning circle, the same local goals are planned with half the car's width plus
+//!   `passage_margin` as the circle, each candidate checked with the car's rectangle
+//!   grown by that margin ([`Footprint`]), and a path through such a passage is driven
+//!   at `passage_speed`. An obstacle on the mission's goal makes the stop short of it
+//!   say so, and is no dead end to back out of.
 //! - Steering limit: among the feasible a6 the cheapest path within 85 % of the
 //!   actuator's limit is taken (the method has no steering constraint).
 //! - Margins: the vehicle radius grows by a safety margin; a static obstacle the car
@@ -60,7 +66,7 @@
 //! `frame` (the world and planning frames), `search` (where a replanning aims: the
 //! local goal and its detours), `pacing` (moving obstacles: the pace and the sweep),
 //! `align` (turning towards the goal first), `reverse` (backing out of a dead end),
-//! `solver` (solving a replanning),
+//! `footprint` (the car's rectangle), `solver` (solving a replanning),
 //! `follower` (the steering laws) and `error`; this file keeps the navigator, which
 //! builds the requests, takes the outcomes and follows the path.
 
