@@ -83,6 +83,8 @@ pub struct PlannerConfig {
     pub passage_margin: f64,
     /// Speed through such a passage, m/s.
     pub passage_speed: f64,
+    /// Give way to the right of oncoming traffic (false: to the left).
+    pub keep_right: bool,
     /// Cruise speed; t_f - t_k = (x_f - x_k) / cruise_speed, m/s.
     pub cruise_speed: f64,
     /// Fraction of the steering limit a planned path may use.
@@ -131,6 +133,7 @@ impl Default for PlannerConfig {
             safety_margin: 0.3,
             passage_margin: 0.15,
             passage_speed: 1.0,
+            keep_right: true,
             cruise_speed: 2.0,
             steer_usage: 0.85,
             final_approach: 1.5,

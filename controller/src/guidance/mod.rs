@@ -47,6 +47,11 @@
 //!   and with no feasible pace the car stops. The follower then drives the plan's pace
 //!   (x advancing at w1), so the car is where the plan assumed; the next replanning
 //!   (T_s later) speeds up again once the obstacle has passed.
+//! - Traffic: behind an obstacle going the car's way the pace follows the gap
+//!   ([`pacing::traffic`]); when traffic slows the local goal's path, or it swerves
+//!   past oncoming traffic on the side not kept to, the detours are weighed against
+//!   it (deviation, dearer on that side, plus time lost), so the car gives way
+//!   sideways before it slows or stops.
 //! - Headings the polynomial cannot start from: beyond `align_enter_deg` from the
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within
@@ -363,17 +368,35 @@ impl Navigator {
         let goal_blocked = !search::clear_of(&end, obstacles, narrow.r0);
         let theta = wrap(pose.theta - frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
-        let pacing = any_moving.then(|| Pacing {
-            speeds: pc
+        let pacing = any_moving.then(|| {
+            let (follow, oncoming) = pacing::traffic(
+                &problem.obstacles,
+                problem.state.x,
+                problem.state.y,
+                wide.r0,
+            );
+            // Behind traffic going its way, the car paces itself on the gap: no fixed
+            // pace faster than that is tried (passing it is a detour's business).
+            let slowest = pc.pace_fractions.iter().copied().fold(1.0, f64::min) * pc.cruise_speed;
+            let cap = follow.map_or(f64::INFINITY, |v| v.clamp(slowest, pc.cruise_speed));
+            let mut speeds: Vec<f64> = pc
                 .pace_fractions
                 .iter()
                 .map(|f| f * pc.cruise_speed)
-                .collect(),
-            speed_now: pose.v.max(0.0),
-            accel: self.cfg.follower.accel_limit,
-            decel: self.cfg.follower.decel,
-            time_margin: pc.moving_time_margin_s,
-            time_weight: pc.pace_time_weight,
+                .filter(|&v| v < cap)
+                .chain(follow.map(|_| cap))
+                .collect();
+            speeds.sort_by(|a, b| b.total_cmp(a));
+            Pacing {
+                speeds,
+                speed_now: pose.v.max(0.0),
+                accel: self.cfg.follower.accel_limit,
+                decel: self.cfg.follower.decel,
+                time_margin: pc.moving_time_margin_s,
+                time_weight: pc.pace_time_weight,
+                oncoming,
+                keep_right: pc.keep_right,
+            }
         });
         let threshold = if self.aligning.is_some() {
             pc.align_exit_deg
@@ -715,6 +738,53 @@ mod tests {
             replan_and_follow(&mut nav, &along(29.8), &[blocker]),
             Guidance::Stop { .. }
         ));
+    }
+
+    #[test]
+    fn an_oncoming_cart_on_the_line_is_given_way_to_on_the_right_without_stopping() {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = 50.0;
+        cfg.mission.goal_y = 0.0;
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 2.0,
+            phi: 0.0,
+        };
+        let cart = Circle {
+            x: 16.0,
+            y: 0.3,
+            radius: 1.3,
+            vx: -1.5,
+            vy: 0.0,
+        };
+        for keep_right in [true, false] {
+            cfg.planner.keep_right = keep_right;
+            let nav = Navigator::new(&cfg).expect("navigator");
+            let req = nav.request(0.0, &pose, &[cart]);
+            assert!(req.pacing.as_ref().is_some_and(|p| p.oncoming));
+            let outcome = solve(&req);
+            let (trajectory, record) = outcome.result.expect("planned");
+            assert!(trajectory.is_some(), "{record:?}");
+            let pace = record.pace.expect("pace");
+            assert!(pace >= 0.8 * cfg.planner.cruise_speed, "no slowing: {pace}");
+            // Where the car meets the cart, it is on the side it keeps to.
+            let y_at_cart = record
+                .path
+                .iter()
+                .min_by(|a, b| (a[0] - 10.0).abs().total_cmp(&(b[0] - 10.0).abs()))
+                .map(|p| p[1])
+                .expect("path");
+            assert!(
+                if keep_right {
+                    y_at_cart < -1.0
+                } else {
+                    y_at_cart > 1.0
+                },
+                "keep_right {keep_right}: y {y_at_cart}"
+            );
+        }
     }
 
     #[test]

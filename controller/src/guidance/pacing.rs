@@ -20,6 +20,54 @@ pub struct Pacing {
     pub time_margin: f64,
     /// Weight of the time lost by a slower pace against the path's deviation, m^3/s.
     pub time_weight: f64,
+    /// An obstacle near the line comes towards the car: give way to the side kept to
+    /// (a deviation to the other side costs [`WRONG_SIDE_WEIGHT`] times as much).
+    pub oncoming: bool,
+    /// The side kept to: the right (else the left).
+    pub keep_right: bool,
+}
+
+/// How much more a deviation to the side not kept to costs while giving way.
+pub const WRONG_SIDE_WEIGHT: f64 = 4.0;
+/// Slower than this along the line, an obstacle is no traffic to follow or meet, m/s.
+const TRAFFIC_MIN_SPEED: f64 = 0.2;
+/// Traffic is what moves within the car's circle plus this of the line, metres.
+const TRAFFIC_BAND: f64 = 1.0;
+
+/// Headway kept behind traffic going the car's way: this time at its speed, plus
+/// [`FOLLOW_GAP`], beyond the car's circle and the obstacle's, seconds.
+const FOLLOW_TIME_GAP: f64 = 1.5;
+const FOLLOW_GAP: f64 = 1.0;
+/// How fast the following pace closes a headway error, 1/s.
+const FOLLOW_GAIN: f64 = 0.3;
+
+/// What the moving obstacles near the line do (planning frame, the car at (px, py),
+/// `r0` its circle with margin): the pace to follow the nearest going the car's way at
+/// (its speed along the line, plus [`FOLLOW_GAIN`] times the headway error, so the
+/// pace changes with the gap instead of flipping between fixed fractions above and
+/// below the leader's speed), and whether one comes towards the car.
+pub fn traffic(obstacles: &[planner::Obstacle], px: f64, py: f64, r0: f64) -> (Option<f64>, bool) {
+    let mut leader: Option<(f64, f64)> = None;
+    let mut oncoming = false;
+    for o in obstacles {
+        let near = o.x + o.radius > px && (o.y - py).abs() < r0 + o.radius + TRAFFIC_BAND;
+        if !near {
+            continue;
+        }
+        if o.vx > TRAFFIC_MIN_SPEED {
+            let gap = (o.x - px).hypot(o.y - py) - o.radius - r0;
+            if leader.is_none_or(|l| gap < l.0) {
+                leader = Some((gap, o.vx));
+            }
+        } else if o.vx < -TRAFFIC_MIN_SPEED {
+            oncoming = true;
+        }
+    }
+    let follow = leader.map(|(gap, v)| {
+        let headway = FOLLOW_TIME_GAP * v + FOLLOW_GAP;
+        v + FOLLOW_GAIN * (gap - headway)
+    });
+    (follow, oncoming)
 }
 
 impl Pacing {
@@ -29,6 +77,17 @@ impl Pacing {
     /// wide swerve at full pace.
     pub fn score(&self, mean_sq_deviation: f64, pace: f64, fastest: f64) -> f64 {
         mean_sq_deviation + self.time_weight * (1.0 / pace - 1.0 / fastest)
+    }
+
+    /// The weight of a deviation `y` from the line (positive: left): 1, or
+    /// [`WRONG_SIDE_WEIGHT`] on the side not kept to while traffic comes towards the car.
+    pub fn side_weight(&self, y: f64) -> f64 {
+        let wrong = if self.keep_right { y > 0.0 } else { y < 0.0 };
+        if self.oncoming && wrong {
+            WRONG_SIDE_WEIGHT
+        } else {
+            1.0
+        }
     }
 
     /// How far off the planned schedule the car ends up while changing from its
@@ -80,6 +139,76 @@ pub fn sweep(
 
 #[cfg(test)]
 mod tests {
+    fn walker(x: f64, y: f64, vx: f64) -> planner::Obstacle {
+        planner::Obstacle {
+            x,
+            y,
+            radius: 0.3,
+            vx,
+            vy: 0.0,
+        }
+    }
+
+    #[test]
+    fn traffic_ahead_is_followed_on_the_gap_and_oncoming_traffic_is_flagged() {
+        let r0 = 2.3;
+        // A walker 10 m ahead at 0.7 m/s: the headway wanted is 1.5 * 0.7 + 1 m.
+        let (follow, oncoming) = traffic(&[walker(10.0, 0.3, 0.7)], 0.0, 0.0, r0);
+        let gap = 10.0f64.hypot(0.3) - 0.3 - r0;
+        let want = 0.7 + 0.3 * (gap - (1.5 * 0.7 + 1.0));
+        assert!((follow.expect("a leader") - want).abs() < 1e-12 && !oncoming);
+        // Closer, slower: the pace drops below the walker's speed to open the gap.
+        let (near, _) = traffic(&[walker(4.0, 0.0, 0.7)], 0.0, 0.0, r0);
+        assert!(near.expect("a leader") < 0.7);
+        // The nearest leader sets the pace.
+        let (both, _) = traffic(
+            &[walker(10.0, 0.0, 0.7), walker(4.0, 0.0, 0.7)],
+            0.0,
+            0.0,
+            r0,
+        );
+        assert_eq!(both, near);
+        // Coming towards the car, or far off the line, or behind: no leader.
+        assert_eq!(
+            traffic(&[walker(15.0, 1.0, -1.5)], 0.0, 0.0, r0),
+            (None, true)
+        );
+        assert_eq!(
+            traffic(&[walker(15.0, 6.0, -1.5)], 0.0, 0.0, r0),
+            (None, false)
+        );
+        assert_eq!(
+            traffic(&[walker(-5.0, 0.0, 0.7)], 0.0, 0.0, r0),
+            (None, false)
+        );
+        // Standing still is no traffic.
+        assert_eq!(
+            traffic(&[walker(8.0, 0.0, 0.1)], 0.0, 0.0, r0),
+            (None, false)
+        );
+    }
+
+    #[test]
+    fn only_while_traffic_comes_towards_the_car_is_the_other_side_dearer() {
+        let mut p = Pacing {
+            speeds: vec![2.0],
+            speed_now: 2.0,
+            accel: 1.0,
+            decel: 1.0,
+            time_margin: 1.0,
+            time_weight: 2.0,
+            oncoming: false,
+            keep_right: true,
+        };
+        assert_eq!(p.side_weight(1.0), 1.0);
+        p.oncoming = true;
+        assert_eq!(p.side_weight(1.0), WRONG_SIDE_WEIGHT);
+        assert_eq!(p.side_weight(-1.0), 1.0);
+        p.keep_right = false;
+        assert_eq!(p.side_weight(-1.0), WRONG_SIDE_WEIGHT);
+        assert_eq!(p.side_weight(1.0), 1.0);
+    }
+
     use super::*;
 
     #[test]
@@ -128,6 +257,8 @@ mod tests {
             decel: 1.0,
             time_margin: 1.0,
             time_weight: 2.0,
+            oncoming: false,
+            keep_right: true,
         };
         assert_eq!(pacing.schedule_slip(2.0), 0.0);
         // Slowing from 2 to 1 m/s at 1 m/s^2 takes 1 s and 1.5 m instead of 1 m.

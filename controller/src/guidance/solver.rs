@@ -120,6 +120,11 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
     // The local goal, then the detours in order: the first with a feasible path (or
     // the planner's refusal); with none, the local goal's outcome.
     let nominal = towards(&req.problem, req.frame, None);
+    if let Some(pacing) = &req.pacing
+        && let Some(outcome) = give_way_or_pass(req, pacing, &nominal, towards)
+    {
+        return outcome;
+    }
     if !no_path(&nominal) {
         return nominal;
     }
@@ -139,6 +144,81 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
         }
     }
     nominal
+}
+
+/// Below this fraction of the fastest pace the local goal's path is slowed by traffic,
+/// and the detours are weighed against it.
+const SLOWED: f64 = 0.8;
+
+/// A swerve past oncoming traffic wider than this on the side not kept to is weighed
+/// against the detours, metres.
+const WRONG_SIDE: f64 = 0.5;
+
+/// With moving obstacles in view and the local goal's path slowed below [`SLOWED`] of
+/// the fastest pace, or swerving past oncoming traffic on the side not kept to (more
+/// than [`WRONG_SIDE`]), or none feasible: the local goal and every detour, each at its
+/// best pace, and the one with the least [`Pacing::score`] wins, its deviation taken
+/// from the local goal's line and weighted by [`Pacing::side_weight`] (giving way to
+/// the side kept to, passing slower traffic where that beats following it). None when
+/// the local goal is not slowed, or nothing is feasible.
+fn give_way_or_pass(
+    req: &PlanRequest,
+    pacing: &Pacing,
+    nominal: &PlanOutcome,
+    towards: impl Fn(&PlanProblem, PathFrame, Option<&Footprint>) -> PlanOutcome,
+) -> Option<PlanOutcome> {
+    let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
+    // The path's deviations from the local goal's line, at 21 points.
+    let deviations = |o: &PlanOutcome| -> Option<Vec<f64>> {
+        let Ok((Some(t), _)) = &o.result else {
+            return None;
+        };
+        let p = t.path();
+        let n = 20;
+        Some(
+            (0..=n)
+                .map(|j| {
+                    let x = p.x_k() + p.span() * f64::from(j) / f64::from(n);
+                    let (wx, wy) = o.frame.to_world(x, p.y(x));
+                    req.frame.to_path(wx, wy).1
+                })
+                .collect(),
+        )
+    };
+    let weigh = match &nominal.result {
+        Ok((Some(_), r)) => {
+            r.pace.is_some_and(|p| p < SLOWED * fastest)
+                || deviations(nominal).is_some_and(|ys| {
+                    ys.iter()
+                        .any(|&y| y.abs() > WRONG_SIDE && pacing.side_weight(y) > 1.0)
+                })
+        }
+        Ok((None, _)) => true,
+        Err(_) => false,
+    };
+    if !weigh {
+        return None;
+    }
+    let cost = |o: &PlanOutcome| -> Option<f64> {
+        let ys = deviations(o)?;
+        let deviation = ys
+            .iter()
+            .map(|&y| pacing.side_weight(y) * y * y)
+            .sum::<f64>()
+            / ys.len() as f64;
+        let pace = o.result.as_ref().ok().and_then(|r| r.1.pace)?;
+        Some(pacing.score(deviation, pace, fastest))
+    };
+    let mut best: Option<(f64, PlanOutcome)> = cost(nominal).map(|c| (c, nominal.clone()));
+    for (problem, frame) in &req.detours {
+        let outcome = towards(problem, *frame, None);
+        if let Some(c) = cost(&outcome)
+            && best.as_ref().is_none_or(|b| c < b.0)
+        {
+            best = Some((c, outcome));
+        }
+    }
+    best.map(|b| b.1)
 }
 
 /// One local goal's planning problem solved (see [`solve`]); with a footprint, only
