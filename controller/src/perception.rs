@@ -94,6 +94,10 @@
 //! plotting. A wall track keeps the latest segment associated with it (no map of the
 //! parts seen before) and walls are reported with zero velocity.
 //!
+//! A confirmed static track the scan could not have seen ([`View::sees`]: out of the
+//! field of view, beyond the range, or behind a nearer return) is remembered instead of
+//! missed while within `memory_radius` of the vehicle (a local map).
+//!
 //! Only obstacles whose nearest point is within `detection_radius` (the paper's 8 m)
 //! of the vehicle's reference point (the rear axle centre, the pose's origin) are
 //! reported; tracking goes on beyond it so that velocities have converged when an
@@ -112,7 +116,7 @@ mod track;
 pub use cluster::cluster_points;
 pub use config::PerceptionConfig;
 pub use detect::{
-    CircleMeasurement, Detections, ObstacleKind, SegmentMeasurement, cover_segment, detect,
+    CircleMeasurement, Detections, ObstacleKind, SegmentMeasurement, View, cover_segment, detect,
 };
 pub use fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
 pub use frame::{Beam, Pose2, Scan, ScanPoint, scan_points};

@@ -780,6 +780,92 @@ mod perception {
     }
 
     #[test]
+    fn a_post_out_of_sight_is_remembered_within_the_memory_radius_and_then_forgotten() {
+        let cfg = PerceptionConfig {
+            detection_radius: 30.0,
+            ..PerceptionConfig::default()
+        };
+        let mount = default_mount();
+        let mut p = Perception::new(cfg.clone()).expect("config");
+        let mut rng = Rng(7);
+        let world = [Shape::Circle {
+            c: [6.0, 0.0],
+            r: 0.4,
+        }];
+        let mut k = 0;
+        let mut step = |p: &mut Perception, pose: &Pose2, ranges: &[f32]| -> PerceptionOutput {
+            let out = p
+                .update(&LMS111.scan(k as f64 / RATE, ranges), &mount, pose)
+                .expect("valid");
+            k += 1;
+            out
+        };
+        let ahead = Pose2::new(0.0, 0.0, 0.0);
+        for _ in 0..10 {
+            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
+            assert!(step(&mut p, &ahead, &ranges).obstacles.len() <= 1);
+        }
+        // Facing away (the post in the 90 degrees behind the scanner): no return at
+        // all, yet the post is kept far beyond `delete_misses` scans, with no miss.
+        let away = Pose2::new(0.0, 0.0, PI);
+        let empty = vec![f32::INFINITY; 541];
+        for _ in 0..(3 * cfg.delete_misses) {
+            let out = step(&mut p, &away, &empty);
+            assert_eq!(out.obstacles.len(), 1, "remembered");
+            assert_eq!(out.obstacles[0].misses, 0);
+            assert!(dist([out.obstacles[0].x, out.obstacles[0].y], [6.0, 0.0]) < 0.1);
+        }
+        // In view again with nothing there: it was moved, so it is missed and deleted.
+        let mut gone = false;
+        for _ in 0..=cfg.delete_misses {
+            gone = step(&mut p, &ahead, &empty).obstacles.is_empty();
+        }
+        assert!(gone, "a post in sight that returns nothing is deleted");
+        // Seen again, then left behind farther than the memory radius: forgotten.
+        for _ in 0..10 {
+            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
+            step(&mut p, &ahead, &ranges);
+        }
+        let far = Pose2::new(-cfg.memory_radius - 1.0, 0.0, PI);
+        assert!(step(&mut p, &far, &empty).obstacles.is_empty(), "forgotten");
+        // Behind a nearer return it is hidden, not missed.
+        let mut p = Perception::new(cfg.clone()).expect("config");
+        for _ in 0..10 {
+            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
+            step(&mut p, &ahead, &ranges);
+        }
+        let screen = [Shape::Segment {
+            a: [3.5, -2.0],
+            b: [3.5, 2.0],
+        }];
+        for _ in 0..(3 * cfg.delete_misses) {
+            let ranges = LMS111.ranges(&screen, &ahead, &mount, &mut rng, SIGMA);
+            let out = step(&mut p, &ahead, &ranges);
+            assert!(
+                out.obstacles
+                    .iter()
+                    .any(|o| dist([o.x, o.y], [6.0, 0.0]) < 0.1 && o.misses == 0),
+                "the hidden post is kept"
+            );
+        }
+        // With no memory, the paper's behaviour: deleted after `delete_misses` scans.
+        let mut p = Perception::new(PerceptionConfig {
+            memory_radius: 0.0,
+            ..cfg.clone()
+        })
+        .expect("config");
+        for _ in 0..10 {
+            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
+            step(&mut p, &ahead, &ranges);
+        }
+        let mut out = step(&mut p, &away, &empty);
+        for _ in 1..cfg.delete_misses {
+            out = step(&mut p, &away, &empty);
+        }
+        assert!(out.obstacles.is_empty());
+    }
+
+    #[test]
     fn malformed_inputs_are_errors() {
         let cfg = PerceptionConfig::default();
         let mount = default_mount();

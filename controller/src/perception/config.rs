@@ -15,6 +15,11 @@ pub struct PerceptionConfig {
     /// distance instead: the car closes on them faster, so it must see them earlier
     /// (the larger of the two applies).
     pub moving_detection_radius: f64,
+    /// A static obstacle out of the laser's sight (outside its field of view, beyond
+    /// its range, or behind a nearer return) is remembered, not missed, while it is
+    /// within this of the vehicle's reference point (a local map), metres; 0: forget
+    /// it as the paper does, after `delete_misses` scans.
+    pub memory_radius: f64,
     /// The scanner's range noise (1 sigma); LMS111: 12 mm.
     pub range_noise_sigma: f64,
 
@@ -101,6 +106,7 @@ impl Default for PerceptionConfig {
         PerceptionConfig {
             detection_radius: 8.0,
             moving_detection_radius: 16.0,
+            memory_radius: 25.0,
             range_noise_sigma: 0.012,
             breakpoint_lambda_deg: 10.0,
             breakpoint_noise_factor: 3.0,
@@ -218,9 +224,11 @@ impl PerceptionConfig {
             }
         }
         // The longest-range 2D scanners reach 80 m (LMS291).
+        non_negative("memory_radius", self.memory_radius)?;
         for (field, v) in [
             ("detection_radius", self.detection_radius),
             ("moving_detection_radius", self.moving_detection_radius),
+            ("memory_radius", self.memory_radius),
         ] {
             if v > 100.0 {
                 return Err(invalid(field, format!("must be at most 100 m, got {v}")));

@@ -76,6 +76,53 @@ pub struct Detections {
     pub circles: Vec<CircleMeasurement>,
     /// Wall segments.
     pub segments: Vec<SegmentMeasurement>,
+    /// What the scan could have seen.
+    pub view: View,
+}
+
+/// A return nearer than an object by more than this hides it, metres.
+const OCCLUSION_SLACK: f64 = 0.3;
+
+/// What one scan could see: its beams (laser frame) and what each returned, so that a
+/// track outside the field of view, beyond the range or behind a nearer return is not
+/// counted as missed (the local map remembers it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    pub angle_min: f64,
+    pub angle_increment: f64,
+    pub range_max: f64,
+    /// One range per beam; +inf: no return; NaN: no echo (it shows nothing).
+    pub ranges: Vec<f32>,
+}
+
+impl View {
+    /// Whether the disc (x, y, r) in the world frame would show in this scan taken
+    /// from `laser` (world frame): within the range, and some beam towards it within
+    /// the field of view returned no nearer than the disc (less a slack).
+    pub fn sees(&self, laser: &Pose2, x: f64, y: f64, r: f64) -> bool {
+        let (dx, dy) = (x - laser.x, y - laser.y);
+        let d = dx.hypot(dy);
+        if d.is_nan() || d - r > self.range_max {
+            return false;
+        }
+        let last = self.ranges.len() as f64 - 1.0;
+        if self.angle_increment == 0.0 || last < 0.0 || !self.angle_increment.is_finite() {
+            return false;
+        }
+        let bearing = firmware_bridge::geodesy::normalize_rad_pi(dy.atan2(dx) - laser.yaw);
+        let half = if d > r { (r / d).asin() } else { PI };
+        let beam = |a: f64| (a - self.angle_min) / self.angle_increment;
+        let (k0, k1) = (beam(bearing - half), beam(bearing + half));
+        let lo = k0.min(k1).ceil().max(0.0);
+        let hi = k0.max(k1).floor().min(last);
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return false;
+        }
+        let near = d - r - OCCLUSION_SLACK;
+        (lo as usize..=hi as usize)
+            .filter_map(|k| self.ranges.get(k))
+            .any(|&range| f64::from(range) >= near)
+    }
 }
 
 /// Detects the obstacles of one scan (no tracking): transformation, clustering and
@@ -104,6 +151,12 @@ pub fn detect(
         clusters,
         circles,
         segments,
+        view: View {
+            angle_min: scan.angle_min,
+            angle_increment: scan.angle_increment,
+            range_max: scan.range_max,
+            ranges: scan.ranges.to_vec(),
+        },
     })
 }
 

@@ -444,12 +444,29 @@ impl Perception {
                 }
             }
         }
+        // The local map: a confirmed static track the scan could not have seen is
+        // remembered, not missed, while within `memory_radius`.
+        let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
+        let remembered = |x: f64, y: f64, r: f64, confirmed: bool, moving: bool| {
+            cfg.memory_radius > 0.0
+                && confirmed
+                && !moving
+                && (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius
+                && !sees(x, y, r)
+        };
         for (t, u) in self.tracks.iter_mut().zip(&updated) {
-            if !u {
+            let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
+            if !u && !remembered(t.state[0], t.state[1], t.radius, t.life.confirmed, moving) {
                 t.life.record(false, cfg);
             }
         }
-        self.tracks.retain(|t| !t.life.dead(cfg));
+        self.tracks.retain(|t| {
+            !t.life.dead(cfg)
+                && (cfg.memory_radius <= 0.0
+                    || (t.state[0] - pose.x).hypot(t.state[1] - pose.y) - t.radius
+                        <= cfg.memory_radius
+                    || sees(t.state[0], t.state[1], t.radius))
+        });
         for t in &mut self.tracks {
             t.note_motion(stamp, cfg);
         }
@@ -490,12 +507,33 @@ impl Perception {
                 }
             }
         }
+        // A wall is seen when some point of it is (every metre, both ends).
+        let wall_seen = |s: &SegmentMeasurement| {
+            let length = (s.p1[0] - s.p0[0]).hypot(s.p1[1] - s.p0[1]);
+            let n = length.ceil().clamp(1.0, 1e4) as usize;
+            (0..=n).any(|i| {
+                let t = i as f64 / n as f64;
+                let x = s.p0[0] + t * (s.p1[0] - s.p0[0]);
+                let y = s.p0[1] + t * (s.p1[1] - s.p0[1]);
+                sees(x, y, s.half_thickness.max(0.0))
+            })
+        };
+        let near = |s: &SegmentMeasurement| {
+            distance_to_segment([pose.x, pose.y], s.p0, s.p1) <= cfg.memory_radius
+        };
         for (w, u) in self.walls.iter_mut().zip(&updated) {
-            if !u {
+            let kept = cfg.memory_radius > 0.0
+                && w.life.confirmed
+                && near(&w.segment)
+                && !wall_seen(&w.segment);
+            if !u && !kept {
                 w.life.record(false, cfg);
             }
         }
-        self.walls.retain(|w| !w.life.dead(cfg));
+        self.walls.retain(|w| {
+            !w.life.dead(cfg)
+                && (cfg.memory_radius <= 0.0 || near(&w.segment) || wall_seen(&w.segment))
+        });
         for (s, w) in detections.segments.iter().zip(&wall_of) {
             if w.is_none() {
                 self.walls.push(WallTrack {
