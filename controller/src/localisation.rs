@@ -3,6 +3,21 @@
 //! dual-antenna heading, or from course over ground while moving; speed and steering
 //! angle from the actuators' reports; dead reckoning (the bicycle model, integrated
 //! report by report) between fixes, which at 1 Hz are a second and 2 m apart.
+//!
+//! Beyond taking each fix as it is:
+//! - Fix filter: each accepted fix pulls the dead-reckoned pose (position and heading)
+//!   towards it by 1 - exp(-dt / tau), dt the time since the last fix and tau the fix
+//!   kind's time constant (`localisation.fix_time_constant_s`, shorter for RTK fixed
+//!   than for float): white position noise is averaged over a few fixes while the
+//!   motion in between comes from dead reckoning, so the pose does not lag. A fix after
+//!   the GPS was lost, or the first, is taken as it is.
+//! - Steering bias: the wheels may stand off the reported angle (a sensor zero off).
+//!   While the car drives straight-ish at speed, the heading change between fixes
+//!   (their own headings, unfiltered) against the one dead-reckoned from the reported
+//!   angle plus the current estimate says how much bias is left; every metre window
+//!   moves the estimate by `steer_bias_gain` of that, within `max_steer_bias_deg`. The
+//!   pose's angle, dead reckoning and the controller's commands use the corrected angle.
+//! - [`propagate`]: the pose a dead time ahead, with the commands still on their way.
 
 use firmware_bridge::geodesy::{Enu, Geodetic, LocalFrame, course_deg_to_theta, normalize_rad_pi};
 use firmware_bridge::nmea::{FixQuality, GpsReading};
@@ -18,6 +33,14 @@ pub struct Jump {
     pub at: f64,
     pub metres: f64,
 }
+
+/// The bias estimator's window: the heading change over at least this far, metres.
+const BIAS_WINDOW_M: f64 = 1.0;
+/// It learns only above this speed (m/s) and within this road-wheel angle (degrees),
+/// where the heading change is large against the headings' noise and the kinematic
+/// model holds best.
+const BIAS_MIN_SPEED: f64 = 0.8;
+const BIAS_MAX_STEER_DEG: f64 = 12.0;
 
 /// How late a fix may reach the controller after its epoch, for the jump gate, s.
 const FIX_AGE_ALLOWANCE_S: f64 = 0.3;
@@ -46,6 +69,55 @@ pub struct Pose {
     pub phi: f64,
 }
 
+/// The rear axle `ds` further along the arc of road-wheel angle `phi` (midpoint
+/// heading).
+fn advance(p: &mut Pose, ds: f64, phi: f64, wheelbase: f64) {
+    let dtheta = ds * phi.tan() / wheelbase;
+    let mid = p.theta + dtheta / 2.0;
+    p.x += ds * mid.cos();
+    p.y += ds * mid.sin();
+    p.theta = normalize_rad_pi(p.theta + dtheta);
+}
+
+/// The pose `dt` seconds ahead for each target, speed held: in each step the road-wheel
+/// angle first moves towards the step's target (the command acting then, in the
+/// corrected angle; `None`: the ECU holds) with the actuator's first-order
+/// `time_constant`, then the bicycle model advances. The controller propagates its
+/// pose over the steering dead time with the commands sent in it, so the law acts on
+/// where the car will be when its command bites (a Smith predictor).
+pub fn propagate(
+    pose: &Pose,
+    wheelbase: f64,
+    time_constant: f64,
+    dt: f64,
+    targets: impl IntoIterator<Item = Option<f64>>,
+) -> Pose {
+    let pull = if time_constant > 0.0 {
+        1.0 - (-dt / time_constant).exp()
+    } else {
+        1.0
+    };
+    let mut p = *pose;
+    for target in targets {
+        if let Some(t) = target {
+            p.phi += pull * (t - p.phi);
+        }
+        let (ds, phi) = (p.v * dt, p.phi);
+        advance(&mut p, ds, phi, wheelbase);
+    }
+    p
+}
+
+/// The heading change from one fix's heading, and what dead reckoning made of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct BiasWindow {
+    /// The fix's heading the window starts from, radians.
+    theta: f64,
+    /// Heading change and distance dead-reckoned since, radians and metres.
+    turned: f64,
+    driven: f64,
+}
+
 /// The localiser's state.
 #[derive(Debug, Clone)]
 pub struct Localiser {
@@ -69,7 +141,15 @@ pub struct Localiser {
     /// The fix kind of the fix the pose was last taken from.
     pose_quality: Option<FixQuality>,
     speed: f64,
+    /// The reported road-wheel angle, radians (the wheels stand at it plus `bias`).
     phi: f64,
+    /// Fix filter time constants for RTK fixed and for other fixes, seconds.
+    fix_tau: (f64, f64),
+    /// The steering bias estimate, its gain and bound, radians.
+    bias: f64,
+    bias_gain: f64,
+    max_bias: f64,
+    window: Option<BiasWindow>,
 }
 
 impl Localiser {
@@ -90,18 +170,75 @@ impl Localiser {
             pose_quality: None,
             speed: 0.0,
             phi: 0.0,
+            fix_tau: (
+                cfg.localisation.fix_time_constant_s,
+                cfg.localisation.float_fix_time_constant_s,
+            ),
+            bias: 0.0,
+            bias_gain: cfg.localisation.steer_bias_gain,
+            max_bias: cfg.localisation.max_steer_bias_deg.to_radians(),
+            window: None,
         })
     }
 
     /// The actuators' measured speed and steering angle (from their reports) at `now`:
     /// the pose is dead-reckoned up to now with the previous ones, then these hold.
+    /// `phi` is the reported angle; the estimated bias is added to it.
     pub fn on_actuators(&mut self, now: f64, speed: f64, phi: f64) {
-        if let Some(p) = self.predict(now) {
-            self.pose = Some(p);
-            self.at = self.at.max(now.min(self.fixed_at + self.horizon));
-        }
+        self.dead_reckon(now);
         self.speed = speed;
         self.phi = phi;
+    }
+
+    /// The estimated steering bias, radians: the wheels stand at the reported angle
+    /// plus this, so a command for an angle asks for it minus this.
+    pub fn steer_bias(&self) -> f64 {
+        self.bias
+    }
+
+    /// Dead-reckon the pose up to `now` and keep it (and the bias window's share).
+    fn dead_reckon(&mut self, now: f64) -> Option<Pose> {
+        let p = self.predict(now)?;
+        let until = now.min(self.fixed_at + self.horizon);
+        let dt = (until - self.at).max(0.0);
+        let phi = self.phi + self.bias;
+        if dt > 0.0
+            && let Some(w) = &mut self.window
+        {
+            if self.speed >= BIAS_MIN_SPEED && phi.abs() <= BIAS_MAX_STEER_DEG.to_radians() {
+                let ds = self.speed * dt;
+                w.turned += ds * phi.tan() / self.wheelbase;
+                w.driven += ds;
+            } else {
+                self.window = None;
+            }
+        }
+        self.pose = Some(p);
+        self.at = self.at.max(until);
+        Some(p)
+    }
+
+    /// A fix's own heading `theta` (`None`: it had none): closes the bias window once it
+    /// is long enough, moving the estimate, and opens the next.
+    fn learn_bias(&mut self, theta: Option<f64>) {
+        let Some(theta) = theta else {
+            self.window = None;
+            return;
+        };
+        match self.window {
+            Some(w) if w.driven >= BIAS_WINDOW_M => {
+                let left = self.wheelbase * normalize_rad_pi(theta - w.theta - w.turned) / w.driven;
+                self.bias =
+                    (self.bias + self.bias_gain * left).clamp(-self.max_bias, self.max_bias);
+            }
+            Some(_) => return,
+            None => {}
+        }
+        self.window = Some(BiasWindow {
+            theta,
+            turned: 0.0,
+            driven: 0.0,
+        });
     }
 
     /// A GPS epoch arrived at `now`.
@@ -127,26 +264,26 @@ impl Localiser {
             return;
         };
         self.last_fix = Some((now, quality));
-        let previous = self.predict(now);
-        let theta = if let Some(h) = r.heading_deg {
-            self.heading_known = true;
-            course_deg_to_theta(h)
+        let since_fix = now - self.fixed_at;
+        let previous = self.dead_reckon(now);
+        // The fix's own heading, if it has one.
+        let measured = if let Some(h) = r.heading_deg {
+            Some(course_deg_to_theta(h))
         } else if let (Some(c), Some(s)) = (r.course_deg, r.speed_mps) {
-            if s >= COG_MIN_SPEED {
-                self.heading_known = true;
-                // Reversing: the course points backwards.
+            // Reversing: the course points backwards.
+            (s >= COG_MIN_SPEED).then(|| {
                 let cog = course_deg_to_theta(c);
                 if self.speed < 0.0 {
                     normalize_rad_pi(cog + std::f64::consts::PI)
                 } else {
                     cog
                 }
-            } else {
-                previous.map_or(0.0, |p| p.theta)
-            }
+            })
         } else {
-            previous.map_or(0.0, |p| p.theta)
+            None
         };
+        self.heading_known |= measured.is_some();
+        let theta = measured.unwrap_or(previous.map_or(0.0, |p| p.theta));
         let Enu {
             east_m, north_m, ..
         } = enu;
@@ -157,7 +294,7 @@ impl Localiser {
             y: north_m - (ax * s + ay * c),
             theta,
             v: self.speed,
-            phi: self.phi,
+            phi: self.phi + self.bias,
         };
         if let Some(p) = previous {
             let metres = (pose.x - p.x).hypot(pose.y - p.y);
@@ -170,9 +307,27 @@ impl Localiser {
                 + self.speed.abs() * FIX_AGE_ALLOWANCE_S;
             if metres > gate {
                 self.jump.get_or_insert(Jump { at: now, metres });
+                self.window = None;
                 return;
             }
         }
+        self.learn_bias(measured);
+        // The filter's pull: all the way for the first fix and after the GPS was lost.
+        let tau = if quality == FixQuality::RtkFixed {
+            self.fix_tau.0
+        } else {
+            self.fix_tau.1
+        };
+        let pull = match previous {
+            Some(_) if tau > 0.0 && since_fix <= self.horizon => 1.0 - (-since_fix / tau).exp(),
+            _ => 1.0,
+        };
+        let pose = previous.map_or(pose, |p| Pose {
+            x: p.x + pull * (pose.x - p.x),
+            y: p.y + pull * (pose.y - p.y),
+            theta: normalize_rad_pi(p.theta + pull * normalize_rad_pi(pose.theta - p.theta)),
+            ..pose
+        });
         self.pose = Some(pose);
         self.pose_quality = Some(quality);
         self.at = now;
@@ -185,14 +340,10 @@ impl Localiser {
         let mut p = self.pose?;
         let until = now.min(self.fixed_at + self.horizon);
         let dt = (until - self.at).max(0.0);
-        let ds = self.speed * dt;
-        let dtheta = ds * self.phi.tan() / self.wheelbase;
-        let mid = p.theta + dtheta / 2.0;
-        p.x += ds * mid.cos();
-        p.y += ds * mid.sin();
-        p.theta = normalize_rad_pi(p.theta + dtheta);
+        let phi = self.phi + self.bias;
+        advance(&mut p, self.speed * dt, phi, self.wheelbase);
         p.v = self.speed;
-        p.phi = self.phi;
+        p.phi = phi;
         Some(p)
     }
 
