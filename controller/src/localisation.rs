@@ -376,6 +376,225 @@ mod tests {
         }
     }
 
+    /// Deterministic standard normal samples (xorshift64 and Box-Muller), for noise.
+    struct Normal(u64);
+
+    impl Normal {
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+
+        fn sample(&mut self) -> f64 {
+            let (u, v) = (self.uniform(), self.uniform());
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        }
+    }
+
+    /// The fix of the antenna of a car whose rear axle is at `p`, plus `noise` metres
+    /// east and north, with its heading.
+    fn fix_of(frame: &LocalFrame, p: &Pose, antenna_x: f64, noise: (f64, f64)) -> GpsReading {
+        let mut r = reading(
+            frame,
+            p.x + antenna_x * p.theta.cos() + noise.0,
+            p.y + antenna_x * p.theta.sin() + noise.1,
+            Some(firmware_bridge::geodesy::theta_to_course_deg(p.theta)),
+        );
+        r.speed_mps = Some(p.v);
+        r
+    }
+
+    #[test]
+    fn propagation_over_the_dead_time_predicts_the_pose() {
+        // A car at 2 m/s whose steering acts 0.25 s late through a 0.08 s lag, weaving
+        // on commands of up to 15 degrees. The truth is integrated in 1 ms steps.
+        let (wheelbase, dead, lag, dt) = (1.65, 0.25, 0.08f64, 0.01);
+        let command = |t: f64| 15f64.to_radians() * (1.3 * t).sin();
+        let mut truth = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.3,
+            v: 2.0,
+            phi: 0.0,
+        };
+        let mut states = Vec::new();
+        for i in 0..4000 {
+            let t = f64::from(i) * 0.001;
+            if i % 10 == 0 {
+                states.push((t, truth));
+            }
+            // The command sent at the last 10 ms tick at least the dead time ago.
+            let sent = ((t - dead) / dt + 1e-9).floor() * dt;
+            let target = if sent >= 0.0 { command(sent) } else { 0.0 };
+            truth.phi += (target - truth.phi) * (1.0 - (-0.001 / lag).exp());
+            let (ds, phi) = (truth.v * 0.001, truth.phi);
+            advance(&mut truth, ds, phi, wheelbase);
+        }
+        let steps = (dead / dt).round() as u32;
+        for k in [200usize, 250, 300, 350] {
+            let (now, at_now) = states[k];
+            let (_, later) = states[k + steps as usize];
+            let ahead = propagate(
+                &at_now,
+                wheelbase,
+                lag,
+                dt,
+                (0..steps).map(|j| {
+                    let sent = ((now + f64::from(j) * dt - dead) / dt + 1e-9).floor() * dt;
+                    Some(command(sent))
+                }),
+            );
+            let error = (ahead.x - later.x).hypot(ahead.y - later.y);
+            let stale = (at_now.x - later.x).hypot(at_now.y - later.y);
+            assert!(stale > 0.45, "the car moves half a metre in the dead time");
+            assert!(error < 0.01, "at {now}: {error} m off");
+            let heading_error = (ahead.theta - later.theta).abs();
+            assert!(heading_error < 0.2f64.to_radians(), "at {now}: {heading_error}");
+            assert!((ahead.phi - later.phi).abs() < 0.5f64.to_radians());
+            // Without the commands on their way (the ECU holding its angle) the
+            // heading is mispredicted several times worse.
+            let held = propagate(&at_now, wheelbase, lag, dt, (0..steps).map(|_| None));
+            assert!(
+                (held.theta - later.theta).abs() > 3.0 * heading_error,
+                "at {now}: {} against {heading_error}",
+                (held.theta - later.theta).abs()
+            );
+        }
+    }
+
+    /// A car weaving gently at 2 m/s for `seconds`, its wheels at the reported angle
+    /// plus `bias` (radians), fixes at 10 Hz with 0.1 degree heading noise; returns the
+    /// localiser's bias estimate after each fix.
+    fn drive_with_bias(cfg: &ControllerConfig, bias: f64, speed: f64, seconds: f64) -> Vec<f64> {
+        let mut loc = Localiser::new(cfg).expect("datum");
+        let frame = loc.frame;
+        let mut noise = Normal(0x9e37_79b9_7f4a_7c15);
+        let mut truth = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: speed,
+            phi: 0.0,
+        };
+        let mut estimates = Vec::new();
+        for i in 0..(seconds * 100.0) as u32 {
+            let t = f64::from(i) * 0.01;
+            let reported = 6f64.to_radians() * (0.4 * t).sin() - bias;
+            loc.on_actuators(t, speed, reported);
+            if i % 10 == 0 {
+                let mut r = fix_of(&frame, &truth, cfg.vehicle.antenna_x, (0.0, 0.0));
+                r.heading_deg = r.heading_deg.map(|h| h + 0.1 * noise.sample());
+                loc.on_fix(t, &r);
+                estimates.push(loc.steer_bias());
+            }
+            truth.phi = reported + bias;
+            let (ds, phi) = (speed * 0.01, truth.phi);
+            advance(&mut truth, ds, phi, cfg.vehicle.wheelbase);
+        }
+        estimates
+    }
+
+    #[test]
+    fn the_steering_bias_estimate_converges_and_stays_bounded() {
+        let cfg = ControllerConfig::default();
+        let bias = 3f64.to_radians();
+        let estimates = drive_with_bias(&cfg, bias, 2.0, 60.0);
+        let settled = &estimates[estimates.len() / 2..];
+        for b in settled {
+            assert!((b - bias).abs() < 0.3f64.to_radians(), "{}", b.to_degrees());
+        }
+        // Not there at once: it is a slow estimator.
+        assert!((estimates[10] - bias).abs() > 1f64.to_radians());
+        // A bias beyond the bound: the estimate stops at it.
+        let max = cfg.localisation.max_steer_bias_deg.to_radians();
+        let beyond = drive_with_bias(&cfg, 8f64.to_radians(), 2.0, 60.0);
+        assert!(beyond.iter().all(|b| b.abs() <= max + 1e-12));
+        assert!((beyond[beyond.len() - 1] - max).abs() < 1e-9);
+        // Creeping below the speed gate, or with the gain 0, it learns nothing.
+        assert!(drive_with_bias(&cfg, bias, 0.5, 30.0).iter().all(|b| *b == 0.0));
+        let mut off = cfg.clone();
+        off.localisation.steer_bias_gain = 0.0;
+        assert!(drive_with_bias(&off, bias, 2.0, 30.0).iter().all(|b| *b == 0.0));
+    }
+
+    #[test]
+    fn the_fix_filter_averages_white_noise_and_follows_a_step() {
+        let cfg = ControllerConfig::default();
+        let mut loc = Localiser::new(&cfg).expect("datum");
+        let frame = loc.frame;
+        let mut noise = Normal(0x2545_f491_4f6c_dd1d);
+        let standing = Pose {
+            x: 10.0,
+            y: 5.0,
+            theta: 0.5,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let sigma = 0.08;
+        let (mut raw, mut filtered) = (Vec::new(), Vec::new());
+        for i in 0..400 {
+            let t = f64::from(i) * 0.1;
+            let n = (sigma * noise.sample(), sigma * noise.sample());
+            loc.on_fix(t, &fix_of(&frame, &standing, cfg.vehicle.antenna_x, n));
+            let p = loc.predict(t).expect("pose");
+            raw.push(n.0);
+            filtered.push(p.x - standing.x);
+        }
+        let rms = |e: &[f64]| (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
+        let (raw, filtered) = (rms(&raw[20..]), rms(&filtered[20..]));
+        assert!((raw - sigma).abs() < 0.015, "{raw}");
+        assert!(filtered < 0.5 * raw, "{filtered} against {raw}");
+        // A step of 0.3 m (RTK float converging, say): followed within a second and a
+        // half, not taken at once.
+        let moved = Pose {
+            x: standing.x + 0.3,
+            ..standing
+        };
+        let mut after = Vec::new();
+        for i in 400..420 {
+            let t = f64::from(i) * 0.1;
+            loc.on_fix(t, &fix_of(&frame, &moved, cfg.vehicle.antenna_x, (0.0, 0.0)));
+            after.push(loc.predict(t).expect("pose").x - moved.x);
+        }
+        assert!(after[0] < -0.15, "{after:?}");
+        assert!(after[14].abs() < 0.01, "{after:?}");
+        // Without the filter each fix is taken as it is.
+        let mut raw_cfg = cfg.clone();
+        raw_cfg.localisation.fix_time_constant_s = 0.0;
+        let mut loc = Localiser::new(&raw_cfg).expect("datum");
+        loc.on_fix(0.0, &fix_of(&frame, &standing, cfg.vehicle.antenna_x, (0.0, 0.0)));
+        loc.on_fix(0.1, &fix_of(&frame, &moved, cfg.vehicle.antenna_x, (0.0, 0.0)));
+        assert!((loc.predict(0.1).expect("pose").x - moved.x).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_moving_car_s_exact_fixes_keep_the_filtered_pose_on_the_truth() {
+        // Dead reckoning carries the motion between fixes: the filter adds no lag.
+        let cfg = ControllerConfig::default();
+        let mut loc = Localiser::new(&cfg).expect("datum");
+        let frame = loc.frame;
+        let mut truth = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.2,
+            v: 2.0,
+            phi: 0.1,
+        };
+        for i in 0..500 {
+            let t = f64::from(i) * 0.01;
+            loc.on_actuators(t, truth.v, truth.phi);
+            if i % 10 == 0 {
+                loc.on_fix(t, &fix_of(&frame, &truth, cfg.vehicle.antenna_x, (0.0, 0.0)));
+                let p = loc.predict(t).expect("pose");
+                assert!((p.x - truth.x).hypot(p.y - truth.y) < 0.005, "{t}: {p:?} {truth:?}");
+            }
+            let (ds, phi) = (truth.v * 0.01, truth.phi);
+            advance(&mut truth, ds, phi, cfg.vehicle.wheelbase);
+        }
+    }
+
     #[test]
     fn antenna_offset_is_removed_along_the_heading() {
         let cfg = ControllerConfig::default();
