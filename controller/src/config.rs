@@ -132,8 +132,8 @@ impl Default for PlannerConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct LocalisationConfig {
     /// Time constant of the fix filter for RTK fixed fixes, seconds: each fix pulls the
-    /// dead-reckoned pose (position and heading) towards it by 1 - exp(-dt / this), dt
-    /// the time since the last fix (0: every fix is taken as it is).
+    /// dead-reckoned pose (position and heading) towards it by 1 - exp(-dt / this) (at
+    /// most half way), dt the time since the last fix (0: every fix is taken as it is).
     pub fix_time_constant_s: f64,
     /// The same for RTK float (and worse) fixes, which are noisier, seconds.
     pub float_fix_time_constant_s: f64,
@@ -148,9 +148,9 @@ pub struct LocalisationConfig {
 impl Default for LocalisationConfig {
     fn default() -> Self {
         LocalisationConfig {
-            fix_time_constant_s: 0.4,
-            float_fix_time_constant_s: 1.0,
-            steer_bias_gain: 0.1,
+            fix_time_constant_s: 0.5,
+            float_fix_time_constant_s: 1.25,
+            steer_bias_gain: 0.2,
             max_steer_bias_deg: 5.0,
         }
     }

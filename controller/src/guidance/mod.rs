@@ -45,6 +45,11 @@
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within
 //!   `align_exit_deg`.
+//! - Real actuators: the follower and the planner work from the pose propagated over
+//!   the steering's calibrated dead time with the commands still on their way
+//!   ([`Navigator::follow_ahead`]; `Controller::ahead`), while arrival, progress and
+//!   the approach speed use the pose now; the localiser removes an estimated steering
+//!   sensor bias and filters the fixes ([`crate::localisation`]).
 //!
 //! # Files
 //!
