@@ -278,8 +278,11 @@ def report(out, figures):
         "stays around a centimetre and the followers barely differ (both pass everything). "
         "A follower only shows when something pushes the car off its path within a "
         "replanning period, which is what real golf cars do. The disturbances are "
-        "simulator-side (the controller is not told), written into copies of the "
-        "scenario files:"
+        "simulator-side, written into copies of the scenario files; the controller is "
+        "told only the steering dead time, as the calibration a field team measures "
+        "(it propagates its pose over it), and estimates the steering bias and filters "
+        "the fixes itself (README, Real actuators). The tracking RMS is the controller's "
+        "own lateral error, against its filtered pose propagated over the dead time:"
     )
     L.append("")
     for name, (what, sections) in CONDITIONS.items():

@@ -24,6 +24,10 @@ pub struct Car {
     /// Laser scanner mounting position in the vehicle frame, metres, and yaw, degrees.
     pub laser: [f64; 2],
     pub laser_yaw_deg: f64,
+    /// The steering actuator's dead time and first-order time constant, seconds (what
+    /// the controller propagates the state over before planning and steering).
+    pub steer_dead_time_s: f64,
+    pub steer_time_constant_s: f64,
 }
 
 /// The paper's car.
@@ -38,4 +42,6 @@ pub const PAPER_CAR: Car = Car {
     antenna: [0.5, 0.0],
     laser: [2.0, 0.0],
     laser_yaw_deg: 0.0,
+    steer_dead_time_s: 0.02,
+    steer_time_constant_s: 0.08,
 };

@@ -38,6 +38,12 @@ pub struct Vehicle {
     pub laser_x: f64,
     pub laser_y: f64,
     pub laser_yaw_deg: f64,
+    /// The steering actuator's dead time, seconds, as measured on the car: the state is
+    /// propagated over it (with the commands still on their way) before planning and
+    /// steering, so the law acts on where the car will be when the command bites.
+    pub steer_dead_time_s: f64,
+    /// The steering actuator's first-order time constant, seconds (the same prediction).
+    pub steer_time_constant_s: f64,
 }
 
 impl Default for Vehicle {
@@ -57,6 +63,8 @@ impl Default for Vehicle {
             laser_x: car.laser[0],
             laser_y: car.laser[1],
             laser_yaw_deg: car.laser_yaw_deg,
+            steer_dead_time_s: car.steer_dead_time_s,
+            steer_time_constant_s: car.steer_time_constant_s,
         }
     }
 }
@@ -148,6 +156,36 @@ impl Default for PlannerConfig {
             reverse_distance_m: 4.0,
             reverse_speed: 0.5,
             max_reversals: 2,
+        }
+    }
+}
+
+/// Localisation tuning: how fixes are filtered and how the steering sensor's bias is
+/// estimated.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LocalisationConfig {
+    /// Time constant of the fix filter for RTK fixed fixes, seconds: each fix pulls the
+    /// dead-reckoned pose (position and heading) towards it by 1 - exp(-dt / this) (at
+    /// most half way), dt the time since the last fix (0: every fix is taken as it is).
+    pub fix_time_constant_s: f64,
+    /// The same for RTK float (and worse) fixes, which are noisier, seconds.
+    pub float_fix_time_constant_s: f64,
+    /// Gain of the steering-bias estimator per metre window driven straight-ish at
+    /// speed (0: no estimation): the bias moves by this fraction of what the window's
+    /// heading change, against the dead-reckoned one, says is left.
+    pub steer_bias_gain: f64,
+    /// The estimated steering bias stays within +- this, degrees.
+    pub max_steer_bias_deg: f64,
+}
+
+impl Default for LocalisationConfig {
+    fn default() -> Self {
+        LocalisationConfig {
+            fix_time_constant_s: 0.5,
+            float_fix_time_constant_s: 1.25,
+            steer_bias_gain: 0.2,
+            max_steer_bias_deg: 5.0,
         }
     }
 }
@@ -245,6 +283,7 @@ impl SafetyConfig {
 pub struct ControllerConfig {
     pub mission: Mission,
     pub vehicle: Vehicle,
+    pub localisation: LocalisationConfig,
     pub planner: PlannerConfig,
     pub follower: FollowerConfig,
     pub safety: SafetyConfig,
@@ -357,6 +396,41 @@ impl ControllerConfig {
             within(&at(k), x, -20.0, 20.0, "m from the rear axle")?;
         }
         angle_deg(&at("laser_yaw_deg"), v.laser_yaw_deg)?;
+        // The scenario's range; the command history the prediction reads covers it
+        // (monitor.rs).
+        within(&at("steer_dead_time_s"), v.steer_dead_time_s, 0.0, 5.0, "s")?;
+        within(
+            &at("steer_time_constant_s"),
+            v.steer_time_constant_s,
+            0.0,
+            2.0,
+            "s",
+        )?;
+
+        let l = &self.localisation;
+        let at = |k: &'static str| FieldPath::of(&["localisation", k]);
+        within(
+            &at("fix_time_constant_s"),
+            l.fix_time_constant_s,
+            0.0,
+            5.0,
+            "s",
+        )?;
+        within(
+            &at("float_fix_time_constant_s"),
+            l.float_fix_time_constant_s,
+            0.0,
+            10.0,
+            "s",
+        )?;
+        within(&at("steer_bias_gain"), l.steer_bias_gain, 0.0, 1.0, "")?;
+        within(
+            &at("max_steer_bias_deg"),
+            l.max_steer_bias_deg,
+            0.0,
+            10.0,
+            "degrees",
+        )?;
 
         let pc = &self.planner;
         let at = |k: &'static str| FieldPath::of(&["planner", k]);

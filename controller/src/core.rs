@@ -18,7 +18,7 @@ use crate::guidance::{
     Circle, FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
 };
 use crate::intrusion::ActuationWatch;
-use crate::localisation::{Localiser, Pose};
+use crate::localisation::{Localiser, Pose, propagate};
 use crate::perception::{Perception, PerceptionError, Pose2, Scan};
 
 /// Command period (STEERING_CMD, THROTTLE_CMD), seconds.
@@ -251,12 +251,39 @@ impl Controller {
         }
     }
 
-    /// Replan if due, recover from a dead end if stuck in one, then follow the current
-    /// plan (or reversal) from `pose`.
-    fn plan_and_follow(&mut self, now: f64, pose: &Pose) -> Guidance {
-        self.plan(now, pose);
+    /// The pose `vehicle.steer_dead_time_s` after `now`, from the pose at `now`: the
+    /// steering commands sent within the dead time are still on their way and act in
+    /// it, in order, through the actuator's lag (bias removed, as the localiser
+    /// corrects the reported angle). A command sent now acts from there, so planning
+    /// and steering start from it.
+    fn ahead(&self, now: f64, pose: &Pose) -> Pose {
+        let v = &self.cfg.vehicle;
+        let bias = self.loc.steer_bias();
+        let steps = (v.steer_dead_time_s / COMMAND_PERIOD).round();
+        let targets = (0..steps as u32).map(|j| {
+            // The command acting in step j was sent at least this long before now.
+            let age = v.steer_dead_time_s - f64::from(j) * COMMAND_PERIOD - 1e-9;
+            match self.monitor.steer_command_as_of(now, age) {
+                Some((true, deg)) => Some(deg.to_radians() + bias),
+                _ => None,
+            }
+        });
+        propagate(
+            pose,
+            v.wheelbase,
+            v.steer_time_constant_s,
+            COMMAND_PERIOD,
+            targets,
+        )
+    }
+
+    /// Replan if due from `ahead` (the pose a steering dead time after `pose`, the one
+    /// at `now`), recover from a dead end if stuck in one, then follow the current
+    /// plan (or reversal) ([`Navigator::follow_ahead`]).
+    fn plan_and_follow(&mut self, now: f64, pose: &Pose, ahead: &Pose) -> Guidance {
+        self.plan(now, ahead);
         self.nav.recover(now, pose, &self.obstacles);
-        self.nav.follow(pose)
+        self.nav.follow_ahead(pose, ahead)
     }
 
     pub fn mode(&self) -> &Mode {
@@ -542,20 +569,23 @@ impl Controller {
                         (true, hold),
                         (true, 0.0, 50.0),
                     ),
-                    Some(pose) => match self.plan_and_follow(now, &pose) {
+                    Some(pose) => match self.plan_and_follow(now, &pose, &self.ahead(now, &pose)) {
                         Guidance::Drive {
                             steer,
                             speed,
                             inputs,
                         } => {
                             self.stop_reason = None;
-                            let steer_deg = steer.to_degrees().clamp(-limit, limit);
+                            let wanted = steer.to_degrees().clamp(-limit, limit);
+                            // The wheels stand at the reported angle plus the bias.
+                            let steer_deg =
+                                (wanted - self.loc.steer_bias().to_degrees()).clamp(-limit, limit);
                             let speed = speed.clamp(0.0, v.max_speed.min(10.0));
                             self.samples.push(Sample {
                                 t: now,
                                 pose,
                                 inputs,
-                                steer_cmd: steer_deg.to_radians(),
+                                steer_cmd: wanted.to_radians(),
                                 speed_cmd: speed,
                             });
                             (

@@ -27,8 +27,10 @@ const SPEED_FALL: f64 = 0.1;
 const SPEED_SPAN_S: f64 = 0.5;
 /// ...for this long, seconds: the drive does not follow.
 const SPEED_STUCK_S: f64 = 1.0;
-/// History kept, seconds.
-const HISTORY_S: f64 = 2.0;
+/// History kept, seconds: the checks' windows, and the longest steering dead time the
+/// configuration allows (`vehicle.steer_dead_time_s`), over which the controller reads
+/// back the steering commands still on their way ([`ActuatorMonitor::steer_command_as_of`]).
+const HISTORY_S: f64 = 5.5;
 
 /// What the monitor found.
 #[derive(Clone, Debug, PartialEq)]
@@ -189,6 +191,12 @@ impl ActuatorMonitor {
             }
             (true, Some(_)) => {}
         }
+    }
+
+    /// The steering command in force `age` seconds before `now` (the newest sent at
+    /// least that long ago): whether it enabled the ECU, and its angle in degrees.
+    pub fn steer_command_as_of(&self, now: f64, age: f64) -> Option<(bool, f64)> {
+        as_of(&self.steer_cmds, now, age)
     }
 
     /// The first finding, kept.

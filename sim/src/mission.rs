@@ -1,7 +1,8 @@
 //! What the controller is told about a scenario: the mission (datum, start, goal) and
-//! the vehicle's calibration (geometry, antenna and laser mounting), exactly as a
-//! field team would configure the car. Nothing else of the scenario (obstacles,
-//! noise) reaches the controller except through its sensors.
+//! the vehicle's calibration (geometry, antenna and laser mounting, the steering's
+//! dead time and time constant), exactly as a field team would configure the car.
+//! Nothing else of the scenario (obstacles, noise, the steering sensor's bias) reaches
+//! the controller except through its sensors.
 
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 
@@ -33,6 +34,10 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.laser_x = scenario.laser.mount_x;
     v.laser_y = scenario.laser.mount_y;
     v.laser_yaw_deg = scenario.laser.mount_yaw_deg;
+    // The steering actuator's timing is calibration a field team measures (a step
+    // response); its sensor bias is not: the controller estimates that itself.
+    v.steer_dead_time_s = scenario.steering.dead_time_s;
+    v.steer_time_constant_s = scenario.steering.time_constant_s;
     cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
     if let Some(r) = scenario.controller.detection_radius {
         cfg.perception.detection_radius = r;

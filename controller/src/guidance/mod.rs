@@ -65,6 +65,11 @@
 //!   rest of it is no longer clear, then replans. At most `max_reversals` times per
 //!   mission; then, or with no clear way back, a controlled stop whose reason says so
 //!   ("no forward path after 2 reversals").
+//! - Real actuators: the follower and the planner work from the pose propagated over
+//!   the steering's calibrated dead time with the commands still on their way
+//!   ([`Navigator::follow_ahead`]; `Controller::ahead`), while arrival, progress and
+//!   the approach speed use the pose now; the localiser removes an estimated steering
+//!   sensor bias and filters the fixes ([`crate::localisation`]).
 //!
 //! # Files
 //!
@@ -529,13 +534,19 @@ impl Navigator {
 
     /// Follow the current path from `pose` (no planning).
     pub fn follow(&mut self, pose: &Pose) -> Guidance {
+        self.follow_ahead(pose, pose)
+    }
+
+    /// Follow the current path: arrival, progress, passing the goal and the approach
+    /// speed from `pose` (where the car is), steering from `ahead` (where it will be when
+    /// the command acts: the pose propagated over the steering dead time).
+    pub fn follow_ahead(&mut self, pose: &Pose, ahead: &Pose) -> Guidance {
         let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
         let to_goal = (pose.x - goal.0).hypot(pose.y - goal.1);
         if to_goal <= self.cfg.mission.goal_tolerance {
             return Guidance::Arrived;
         }
         self.progress = self.progress_at(pose);
-        let (px, py) = self.frame.to_path(pose.x, pose.y);
         if self.last_leg.length - self.last_leg.to_path(pose.x, pose.y).0 <= 0.0 {
             // Past the goal's x without reaching it: the polynomial cannot go back.
             return Guidance::Stop {
@@ -561,6 +572,8 @@ impl Navigator {
                 reason: format!("planner: {e}"),
             };
         }
+        let pose = ahead;
+        let (px, py) = self.frame.to_path(pose.x, pose.y);
         if let Some(steer) = self.aligning {
             let theta = wrap(pose.theta - self.frame.angle);
             return Guidance::Drive {

@@ -150,9 +150,10 @@ pub struct SteeringConfig {
 impl Default for SteeringConfig {
     /// A golf-car-class electric power steering retrofit.
     fn default() -> Self {
+        let car = ugv_controller::car::PAPER_CAR;
         SteeringConfig {
-            dead_time_s: 0.02,
-            time_constant_s: 0.08,
+            dead_time_s: car.steer_dead_time_s,
+            time_constant_s: car.steer_time_constant_s,
             max_rate_deg_s: 60.0,
             idle_current_a: 0.5,
             current_per_rate_a: 0.12,
