@@ -85,9 +85,8 @@ pub struct PlannerConfig {
     pub safety_margin: f64,
     /// Passages narrower than the planning circle: when no path clears it, paths are
     /// planned with half the car's width plus this as the circle and taken only where
-    /// the car's rectangle clears every obstacle by this, metres. Walls are covered by
-    /// circles that reach up to 0.25 m past their ends, so a gate in a wall needs
-    /// about 0.25 m more on each side than a gap between posts.
+    /// the car's rectangle clears every obstacle by this, metres (a gate of car width
+    /// plus twice this, plus the walls' perceived half thickness, passes).
     pub passage_margin: f64,
     /// Speed through such a passage, m/s.
     pub passage_speed: f64,
@@ -139,7 +138,7 @@ impl Default for PlannerConfig {
             horizon_m: 20.0,
             horizon_min_m: 8.0,
             safety_margin: 0.3,
-            passage_margin: 0.15,
+            passage_margin: 0.25,
             passage_speed: 1.0,
             keep_right: true,
             cruise_speed: 2.0,

@@ -617,7 +617,8 @@ impl Navigator {
             v: pose.v,
         };
         let steer = self.law.steer(&inputs);
-        // Speed: the plan's pace, slower in curves and towards the goal. Around moving
+        // Speed: the plan's pace, slower in curves, towards the goal and towards the
+        // path's end. Around moving
         // obstacles the plan's timing matters: x must advance at the planned w1, so the
         // speed along the path is w1 sqrt(1 + y'^2).
         let f = &self.cfg.follower;
@@ -641,6 +642,9 @@ impl Navigator {
             )
             .min((f.max_lateral_accel / curvature).sqrt())
             .min((2.0 * f.decel * to_goal).sqrt())
+            // The path's end is where the next replanning may find no way on (a local
+            // goal before a blocked goal or a wall): the car can always stop there.
+            .min((2.0 * f.decel * (path.x_f() - x).max(0.0)).sqrt())
             .min(self.cfg.vehicle.max_speed);
         Guidance::Drive {
             steer,
