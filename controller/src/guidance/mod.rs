@@ -658,6 +658,45 @@ impl Navigator {
 mod tests {
     use super::search::{MAX_DETOURS, clear_of};
     use super::*;
+    use crate::perception::{PerceptionConfig, cover_segment};
+
+    /// The default configuration with the goal at (goal_x, 0): a straight mission east.
+    fn east_to(goal_x: f64) -> ControllerConfig {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.goal_x = goal_x;
+        cfg.mission.goal_y = 0.0;
+        cfg
+    }
+
+    /// The car at (x, y) heading `theta`, at speed `v`, wheels straight.
+    fn car_at(x: f64, y: f64, theta: f64, v: f64) -> Pose {
+        Pose {
+            x,
+            y,
+            theta,
+            v,
+            phi: 0.0,
+        }
+    }
+
+    /// A static post.
+    fn post(x: f64, y: f64, radius: f64) -> Circle {
+        Circle {
+            x,
+            y,
+            radius,
+            vx: 0.0,
+            vy: 0.0,
+        }
+    }
+
+    /// The navigator's progress brought along the route to x = `to` tick by tick, as
+    /// following does.
+    fn drive_east(nav: &mut Navigator, to: i32) {
+        for x in 0..=to {
+            nav.follow(&car_at(f64::from(x), 0.0, 0.0, 0.0));
+        }
+    }
 
     fn replan_and_follow(nav: &mut Navigator, pose: &Pose, obstacles: &[Circle]) -> Guidance {
         assert!(nav.replan_due(0.0, pose));
@@ -759,22 +798,11 @@ mod tests {
 
     #[test]
     fn an_oncoming_cart_on_the_line_is_given_way_to_on_the_right_without_stopping() {
-        let mut cfg = ControllerConfig::default();
-        cfg.mission.goal_x = 50.0;
-        cfg.mission.goal_y = 0.0;
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0,
-            v: 2.0,
-            phi: 0.0,
-        };
+        let mut cfg = east_to(50.0);
+        let pose = car_at(0.0, 0.0, 0.0, 2.0);
         let cart = Circle {
-            x: 16.0,
-            y: 0.3,
-            radius: 1.3,
             vx: -1.5,
-            vy: 0.0,
+            ..post(16.0, 0.3, 1.3)
         };
         for keep_right in [true, false] {
             cfg.planner.keep_right = keep_right;
@@ -1190,12 +1218,6 @@ mod tests {
             .collect();
         assert!(shifts.windows(2).all(|w| w[0] <= w[1] + 1e-9), "{shifts:?}");
     }
-}
-
-#[cfg(test)]
-mod passage_tests {
-    use super::*;
-    use crate::perception::{PerceptionConfig, cover_segment};
 
     /// A fence across the route at x = 20 with a gate `gap` wide centred on it, as
     /// perception covers it: chains of circles spaced for the passage margin.
@@ -1224,25 +1246,11 @@ mod passage_tests {
 
     #[test]
     fn a_gate_of_car_width_plus_0_8_m_is_driven_through_slowly() {
-        let mut cfg = ControllerConfig::default();
-        cfg.mission.goal_x = 40.0;
-        cfg.mission.goal_y = 0.0;
+        let cfg = east_to(40.0);
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 15.5,
-            y: 0.0,
-            theta: 0.0,
-            v: 2.0,
-            phi: 0.0,
-        };
+        let pose = car_at(15.5, 0.0, 0.0, 2.0);
         let gate = fence(cfg.vehicle.width + 0.8, cfg.planner.passage_margin);
-        // Progress along the route follows the car tick by tick.
-        for x in 0..=15 {
-            nav.follow(&Pose {
-                x: f64::from(x),
-                ..pose
-            });
-        }
+        drive_east(&mut nav, 15);
         let req = nav.request(0.0, &pose, &gate);
         let outcome = solve(&req);
         let (trajectory, record) = outcome.result.clone().expect("planned");
@@ -1279,31 +1287,11 @@ mod passage_tests {
 
     #[test]
     fn a_blocked_goal_ends_in_a_stop_that_says_so() {
-        let mut cfg = ControllerConfig::default();
-        cfg.mission.goal_x = 12.0;
-        cfg.mission.goal_y = 0.0;
-        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut nav = Navigator::new(&east_to(12.0)).expect("navigator");
         // A cart parked on the goal; the car 3.5 m before it, no path further.
-        let cart = Circle {
-            x: 12.3,
-            y: 0.0,
-            radius: 1.3,
-            vx: 0.0,
-            vy: 0.0,
-        };
-        let pose = Pose {
-            x: 8.5,
-            y: 0.0,
-            theta: 0.0,
-            v: 0.0,
-            phi: 0.0,
-        };
-        for x in 0..=8 {
-            nav.follow(&Pose {
-                x: f64::from(x),
-                ..pose
-            });
-        }
+        let cart = post(12.3, 0.0, 1.3);
+        let pose = car_at(8.5, 0.0, 0.0, 0.0);
+        drive_east(&mut nav, 8);
         let req = nav.request(0.0, &pose, &[cart]);
         assert!(req.goal_blocked);
         let outcome = solve(&req);

@@ -139,6 +139,20 @@ pub fn sweep(
 
 #[cfg(test)]
 mod tests {
+    /// Paces of 2 and 1 m/s from 2 m/s, 1 m/s^2 either way, no oncoming traffic.
+    fn pacing() -> Pacing {
+        Pacing {
+            speeds: vec![2.0, 1.0],
+            speed_now: 2.0,
+            accel: 1.0,
+            decel: 1.0,
+            time_margin: 1.0,
+            time_weight: 2.0,
+            oncoming: false,
+            keep_right: true,
+        }
+    }
+
     fn walker(x: f64, y: f64, vx: f64) -> planner::Obstacle {
         planner::Obstacle {
             x,
@@ -190,16 +204,7 @@ mod tests {
 
     #[test]
     fn only_while_traffic_comes_towards_the_car_is_the_other_side_dearer() {
-        let mut p = Pacing {
-            speeds: vec![2.0],
-            speed_now: 2.0,
-            accel: 1.0,
-            decel: 1.0,
-            time_margin: 1.0,
-            time_weight: 2.0,
-            oncoming: false,
-            keep_right: true,
-        };
+        let mut p = pacing();
         assert_eq!(p.side_weight(1.0), 1.0);
         p.oncoming = true;
         assert_eq!(p.side_weight(1.0), WRONG_SIDE_WEIGHT);
@@ -250,16 +255,7 @@ mod tests {
 
     #[test]
     fn schedule_slip_and_pace_score() {
-        let pacing = Pacing {
-            speeds: vec![2.0, 1.0],
-            speed_now: 2.0,
-            accel: 1.0,
-            decel: 1.0,
-            time_margin: 1.0,
-            time_weight: 2.0,
-            oncoming: false,
-            keep_right: true,
-        };
+        let pacing = pacing();
         assert_eq!(pacing.schedule_slip(2.0), 0.0);
         // Slowing from 2 to 1 m/s at 1 m/s^2 takes 1 s and 1.5 m instead of 1 m.
         assert!((pacing.schedule_slip(1.0) - 0.5).abs() < 1e-12);
