@@ -92,11 +92,16 @@
 //! lower bound of the planner's r_0 (plus margin); with 0 the circles cover the wall's
 //! footprint itself. The fitted segments are also reported ([`WallSegment`]) for
 //! plotting. A wall track keeps the latest segment associated with it (no map of the
-//! parts seen before) and walls are reported with zero velocity.
+//! parts seen before). Its velocity comes from the segment's normal motion over at
+//! least 0.2 s (a line's motion along itself is not observable); the segments of one
+//! cluster are one rigid body, so a cart's front and side give its whole velocity.
+//! Walls slower than 0.3 m/s, or moving for less than `moving_confirm_s`, are reported
+//! with zero velocity.
 //!
-//! A confirmed static track the scan could not have seen ([`View::sees`]: out of the
-//! field of view, beyond the range, or behind a nearer return) is remembered instead of
-//! missed while within `memory_radius` of the vehicle (a local map).
+//! A confirmed static track detected in at least `memory_min_hits` scans that the scan
+//! could not have seen ([`View::sees`]: out of the field of view, beyond the range, or
+//! behind a nearer return) is remembered, where it was, instead of missed while within
+//! `memory_radius` of the vehicle (a local map).
 //!
 //! Only obstacles whose nearest point is within `detection_radius` (the paper's 8 m)
 //! of the vehicle's reference point (the rear axle centre, the pose's origin) are

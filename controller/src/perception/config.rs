@@ -20,6 +20,9 @@ pub struct PerceptionConfig {
     /// within this of the vehicle's reference point (a local map), metres; 0: forget
     /// it as the paper does, after `delete_misses` scans.
     pub memory_radius: f64,
+    /// Only a track detected in at least this many scans is remembered: a few hits (a
+    /// fragment, spurious returns) are no evidence of an object to keep out of sight.
+    pub memory_min_hits: u32,
     /// The scanner's range noise (1 sigma); LMS111: 12 mm.
     pub range_noise_sigma: f64,
 
@@ -107,6 +110,7 @@ impl Default for PerceptionConfig {
             detection_radius: 8.0,
             moving_detection_radius: 16.0,
             memory_radius: 25.0,
+            memory_min_hits: 10,
             range_noise_sigma: 0.012,
             breakpoint_lambda_deg: 10.0,
             breakpoint_noise_factor: 3.0,

@@ -1,5 +1,6 @@
-//! Multi-target tracking: constant-velocity Kalman filters for posts and blobs, static
-//! wall tracks, M-of-N birth, K-miss deletion, and the planner's circles.
+//! Multi-target tracking: constant-velocity Kalman filters for posts and blobs, wall
+//! tracks with the velocity their faces' normal motion gives, M-of-N birth, K-miss
+//! deletion, a local map of what is out of sight, and the planner's circles.
 
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
 use serde::{Deserialize, Serialize};
@@ -23,7 +24,7 @@ pub struct TrackedObstacle {
     pub x: f64,
     pub y: f64,
     pub radius: f64,
-    /// Velocity after the dead band (zero for static obstacles and walls), m/s.
+    /// Velocity after the dead band (zero for static obstacles), m/s.
     pub vx: f64,
     pub vy: f64,
     /// The filter's velocity before the dead band, m/s.
@@ -298,12 +299,150 @@ impl PointTrack {
     }
 }
 
-/// A wall: the latest segment associated with it (walls are taken as static).
+/// A wall: the latest segment associated with it, and its velocity. A line's motion
+/// along itself cannot be told from more or less of it coming into view, so a segment
+/// measures only its normal speed: its offset from an anchor segment taken at least
+/// `WALL_SPEED_WINDOW_S` earlier (over a shorter time the vehicle's own pose noise
+/// would dominate). The segments of one cluster are one rigid object: two faces at an
+/// angle (a cart's front and side) give the whole velocity, one face updates the
+/// velocity's component along its normal and keeps the rest (from the other face, or
+/// inherited by a face newly in view).
 #[derive(Clone, Debug)]
 struct WallTrack {
     id: u64,
     segment: SegmentMeasurement,
     life: Life,
+    /// The segment the normal speed is measured from, and its stamp.
+    anchor: (SegmentMeasurement, f64),
+    /// The unit normal and the filtered normal speed, once measured.
+    normal_speed: Option<([f64; 2], f64)>,
+    /// The object's velocity, m/s.
+    velocity: [f64; 2],
+    /// Since when the velocity has been above the dead band on every scan.
+    moving_since: Option<f64>,
+}
+
+/// Shortest time over which a wall's normal speed is measured, seconds.
+const WALL_SPEED_WINDOW_S: f64 = 0.2;
+
+/// Slowest speed a wall is reported moving at (above `velocity_dead_band` if that is
+/// higher), m/s: the fitted line of an irregular object (a hedge, a tree's trunk and
+/// crown) shifts a little as more or less of it comes into view, and the vehicle's
+/// pose moves with GPS noise; a wall slower than this is taken as static.
+const WALL_MIN_SPEED: f64 = 0.3;
+
+/// Fastest plausible normal speed of a wall, m/s: a faster apparent motion is a
+/// segment associated with another piece of the same wall (a bend, a hedge's
+/// irregular edge), not motion, and restarts the measurement.
+const WALL_MAX_SPEED: f64 = 6.0;
+
+/// Two faces whose normals' cross product squared is below this (about 30 degrees
+/// apart) give only their common normal velocity.
+const WALL_FACES_MIN_SIN2: f64 = 0.25;
+
+impl WallTrack {
+    fn new(id: u64, segment: SegmentMeasurement, stamp: f64, cfg: &PerceptionConfig) -> Self {
+        WallTrack {
+            id,
+            segment,
+            life: Life::new(stamp, cfg),
+            anchor: (segment, stamp),
+            normal_speed: None,
+            velocity: [0.0, 0.0],
+            moving_since: None,
+        }
+    }
+
+    /// Takes the associated segment `new`; measures the normal speed once the
+    /// anchor is old enough.
+    fn associate(&mut self, new: &SegmentMeasurement, stamp: f64) {
+        self.segment = *new;
+        let (old, since) = self.anchor;
+        let dt = stamp - since;
+        if dt < WALL_SPEED_WINDOW_S - 1e-9 {
+            return;
+        }
+        self.anchor = (*new, stamp);
+        let len = old.length();
+        if len <= 0.0 {
+            return;
+        }
+        let n = [
+            -(old.p1[1] - old.p0[1]) / len,
+            (old.p1[0] - old.p0[0]) / len,
+        ];
+        let mid = [0.5 * (new.p0[0] + new.p1[0]), 0.5 * (new.p0[1] + new.p1[1])];
+        let speed = ((mid[0] - old.p0[0]) * n[0] + (mid[1] - old.p0[1]) * n[1]) / dt;
+        if speed.abs() > WALL_MAX_SPEED {
+            self.normal_speed = None;
+            return;
+        }
+        // Half-way per window: the filter's memory is about two windows.
+        let speed = match self.normal_speed {
+            Some((m, previous)) => 0.5 * (speed + previous * (m[0] * n[0] + m[1] * n[1])),
+            None => speed,
+        };
+        self.normal_speed = Some((n, speed));
+    }
+
+    /// Sets the velocity from the object's faces and notes the motion at `stamp`.
+    fn set_velocity(&mut self, faces: &[([f64; 2], f64)], stamp: f64, cfg: &PerceptionConfig) {
+        self.velocity = match faces {
+            [] => return,
+            [(n, s)] => {
+                let along = s - (n[0] * self.velocity[0] + n[1] * self.velocity[1]);
+                [
+                    self.velocity[0] + along * n[0],
+                    self.velocity[1] + along * n[1],
+                ]
+            }
+            _ => rigid_velocity(faces),
+        };
+        if self.velocity[0].hypot(self.velocity[1]) >= cfg.velocity_dead_band.max(WALL_MIN_SPEED) {
+            self.moving_since.get_or_insert(stamp);
+        } else {
+            self.moving_since = None;
+        }
+    }
+
+    /// The velocity to report at `stamp`: zero unless above the dead band (and
+    /// `WALL_MIN_SPEED`) for `moving_confirm_s`.
+    fn reported_velocity(&self, stamp: f64, cfg: &PerceptionConfig) -> [f64; 2] {
+        match self.moving_since {
+            Some(since) if stamp - since >= cfg.moving_confirm_s - 1e-9 => self.velocity,
+            _ => [0.0, 0.0],
+        }
+    }
+}
+
+/// The velocity of a rigid object from the normal speeds of two or more faces: the
+/// least-squares solution of n_i . v = s_i when two faces are at an angle, else the
+/// mean normal speed along the first face's normal (signs aligned to it).
+fn rigid_velocity(faces: &[([f64; 2], f64)]) -> [f64; 2] {
+    let Some((first, _)) = faces.first() else {
+        return [0.0, 0.0];
+    };
+    let (mut a, mut b, mut mean) = ([[0.0; 2]; 2], [0.0; 2], 0.0);
+    for (n, s) in faces {
+        let aligned = n[0] * first[0] + n[1] * first[1];
+        mean += aligned.signum() * s;
+        for i in 0..2 {
+            b[i] += n[i] * s;
+            for j in 0..2 {
+                a[i][j] += n[i] * n[j];
+            }
+        }
+    }
+    let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    if det >= WALL_FACES_MIN_SIN2 {
+        [
+            (a[1][1] * b[0] - a[0][1] * b[1]) / det,
+            (a[0][0] * b[1] - a[1][0] * b[0]) / det,
+        ]
+    } else {
+        let mean = mean / faces.len() as f64;
+        [mean * first[0], mean * first[1]]
+    }
 }
 
 /// Association cost of a new segment to a wall (offset plus gap, metres), or None when
@@ -447,16 +586,25 @@ impl Perception {
         // The local map: a confirmed static track the scan could not have seen is
         // remembered, not missed, while within `memory_radius`.
         let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
-        let remembered = |x: f64, y: f64, r: f64, confirmed: bool, moving: bool| {
+        let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
             cfg.memory_radius > 0.0
-                && confirmed
+                && life.confirmed
+                && life.hits >= cfg.memory_min_hits
                 && !moving
                 && (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius
                 && !sees(x, y, r)
         };
         for (t, u) in self.tracks.iter_mut().zip(&updated) {
             let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
-            if !u && !remembered(t.state[0], t.state[1], t.radius, t.life.confirmed, moving) {
+            if *u {
+                continue;
+            }
+            if remembered(t.state[0], t.state[1], t.radius, &t.life, moving) {
+                // Static: the filter's velocity below the dead band is noise, and with
+                // no measurement to correct it the remembered position would drift.
+                t.state[2] = 0.0;
+                t.state[3] = 0.0;
+            } else {
                 t.life.record(false, cfg);
             }
         }
@@ -500,13 +648,49 @@ impl Perception {
             if let Some(wi) = w
                 && let Some(wall) = self.walls.get_mut(*wi)
             {
-                wall.segment = *s;
+                wall.associate(s, stamp);
                 wall.life.record(true, cfg);
                 if let Some(u) = updated.get_mut(*wi) {
                     *u = true;
                 }
             }
         }
+        // Each cluster's faces move together.
+        let faces_of = |cluster: usize| -> Vec<([f64; 2], f64)> {
+            detections
+                .segments
+                .iter()
+                .zip(&wall_of)
+                .filter(|(s, _)| s.cluster == cluster)
+                .filter_map(|(_, w)| w.and_then(|wi| self.walls.get(wi)?.normal_speed))
+                .collect()
+        };
+        let faces: Vec<_> = detections
+            .segments
+            .iter()
+            .map(|s| faces_of(s.cluster))
+            .collect();
+        for (w, f) in wall_of.iter().zip(&faces) {
+            if let Some(wall) = w.and_then(|wi| self.walls.get_mut(wi)) {
+                wall.set_velocity(f, stamp, cfg);
+            }
+        }
+        // A new face of a tracked object moves with it: its velocity, per cluster.
+        let motion_of_cluster = |cluster: usize| {
+            detections
+                .segments
+                .iter()
+                .zip(&wall_of)
+                .filter(|(s, _)| s.cluster == cluster)
+                .find_map(|(_, w)| w.and_then(|wi| self.walls.get(wi)))
+                .map(|w| (w.velocity, w.moving_since))
+        };
+        let inherited: Vec<_> = detections
+            .segments
+            .iter()
+            .zip(&wall_of)
+            .map(|(s, w)| w.is_none().then(|| motion_of_cluster(s.cluster)).flatten())
+            .collect();
         // A wall is seen when some point of it is (every metre, both ends).
         let wall_seen = |s: &SegmentMeasurement| {
             let length = (s.p1[0] - s.p0[0]).hypot(s.p1[1] - s.p0[1]);
@@ -524,6 +708,8 @@ impl Perception {
         for (w, u) in self.walls.iter_mut().zip(&updated) {
             let kept = cfg.memory_radius > 0.0
                 && w.life.confirmed
+                && w.life.hits >= cfg.memory_min_hits
+                && w.reported_velocity(stamp, cfg) == [0.0, 0.0]
                 && near(&w.segment)
                 && !wall_seen(&w.segment);
             if !u && !kept {
@@ -534,13 +720,14 @@ impl Perception {
             !w.life.dead(cfg)
                 && (cfg.memory_radius <= 0.0 || near(&w.segment) || wall_seen(&w.segment))
         });
-        for (s, w) in detections.segments.iter().zip(&wall_of) {
+        for ((s, w), motion) in detections.segments.iter().zip(&wall_of).zip(inherited) {
             if w.is_none() {
-                self.walls.push(WallTrack {
-                    id: self.next_id,
-                    segment: *s,
-                    life: Life::new(stamp, cfg),
-                });
+                let mut wall = WallTrack::new(self.next_id, *s, stamp, cfg);
+                if let Some((velocity, moving_since)) = motion {
+                    wall.velocity = velocity;
+                    wall.moving_since = moving_since;
+                }
+                self.walls.push(wall);
                 self.next_id += 1;
             }
         }
@@ -561,7 +748,6 @@ impl Perception {
         let within_radius = |x: f64, y: f64, r: f64, radius: f64| {
             !filtered || (x - pose.x).hypot(y - pose.y) - r <= radius
         };
-        let within = |x: f64, y: f64, r: f64| within_radius(x, y, r, cfg.detection_radius);
         let mut obstacles = Vec::new();
         for t in &self.tracks {
             if filtered && !t.life.confirmed {
@@ -616,9 +802,15 @@ impl Perception {
                     misses: w.life.misses,
                 });
             }
+            let [vx, vy] = w.reported_velocity(stamp, cfg);
+            let reach = if vx != 0.0 || vy != 0.0 {
+                cfg.moving_detection_radius.max(cfg.detection_radius)
+            } else {
+                cfg.detection_radius
+            };
             let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, cfg);
             for (part, c) in centres.iter().enumerate() {
-                if !within(c[0], c[1], radius) {
+                if !within_radius(c[0], c[1], radius, reach) {
                     continue;
                 }
                 obstacles.push(TrackedObstacle {
@@ -627,9 +819,9 @@ impl Perception {
                     x: c[0],
                     y: c[1],
                     radius,
-                    vx: 0.0,
-                    vy: 0.0,
-                    velocity_estimate: [0.0, 0.0],
+                    vx,
+                    vy,
+                    velocity_estimate: w.velocity,
                     kind: ObstacleKind::WallPiece,
                     confidence,
                     age,
