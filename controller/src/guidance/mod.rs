@@ -399,6 +399,8 @@ impl Navigator {
                 decel: self.cfg.follower.decel,
                 time_margin: pc.moving_time_margin_s,
                 time_weight: pc.pace_time_weight,
+                time_scale: follow
+                    .map_or(1.0, |_| ((self.route.length() - s) / pc.horizon_m).max(1.0)),
                 oncoming,
                 keep_right: pc.keep_right,
             }
@@ -830,6 +832,31 @@ mod tests {
                 "keep_right {keep_right}: y {y_at_cart}"
             );
         }
+    }
+
+    #[test]
+    fn a_slow_cart_ahead_in_an_open_field_is_overtaken_not_followed() {
+        // A cart at walking pace on the route, nothing else: passing it beats following
+        // it at its pace for the rest of the local horizon.
+        let cfg = east_to(60.0);
+        let pose = car_at(0.0, 0.0, 0.0, 2.0);
+        let cart = Circle {
+            vx: 0.3,
+            ..post(9.0, 0.0, 1.3)
+        };
+        let nav = Navigator::new(&cfg).expect("navigator");
+        let req = nav.request(0.0, &pose, &[cart]);
+        assert!(req.pacing.as_ref().is_some_and(|p| !p.oncoming));
+        let (trajectory, record) = solve(&req).result.expect("planned");
+        assert!(trajectory.is_some(), "{record:?}");
+        let pace = record.pace.expect("pace");
+        let widest = record.path.iter().map(|p| p[1].abs()).fold(0.0, f64::max);
+        eprintln!("slow cart ahead: pace {pace:.2} m/s, {widest:.2} m off the line");
+        assert!(
+            pace >= 0.5 * cfg.planner.cruise_speed,
+            "not followed: {pace}"
+        );
+        assert!(widest > 1.3 + 1.0, "passed beside it: {widest}");
     }
 
     #[test]

@@ -20,6 +20,10 @@ pub struct Pacing {
     pub time_margin: f64,
     /// Weight of the time lost by a slower pace against the path's deviation, m^3/s.
     pub time_weight: f64,
+    /// How many local horizons the time lost counts for: 1, or behind traffic going
+    /// the car's way the route left over the horizon (following lasts until the
+    /// leader is passed, so passing it is weighed against following it to the goal).
+    pub time_scale: f64,
     /// An obstacle near the line comes towards the car: give way to the side kept to
     /// (a deviation to the other side costs [`WRONG_SIDE_WEIGHT`] times as much).
     pub oncoming: bool,
@@ -73,10 +77,11 @@ pub fn traffic(obstacles: &[planner::Obstacle], px: f64, py: f64, r0: f64) -> (O
 impl Pacing {
     /// The score of a feasible path at `pace` (lower is better): its mean squared
     /// deviation from the start-goal line (J / span, m^2) plus `time_weight` times the
-    /// time per metre lost against the fastest pace. Yielding by slowing down beats a
-    /// wide swerve at full pace.
+    /// time per metre lost against the fastest pace, `time_scale` times. Yielding to
+    /// crossing traffic by slowing down beats a wide swerve at full pace; a slow
+    /// leader with a long way to go is passed.
     pub fn score(&self, mean_sq_deviation: f64, pace: f64, fastest: f64) -> f64 {
-        mean_sq_deviation + self.time_weight * (1.0 / pace - 1.0 / fastest)
+        mean_sq_deviation + self.time_weight * self.time_scale * (1.0 / pace - 1.0 / fastest)
     }
 
     /// The weight of a deviation `y` from the line (positive: left): 1, or
@@ -148,6 +153,7 @@ mod tests {
             decel: 1.0,
             time_margin: 1.0,
             time_weight: 2.0,
+            time_scale: 1.0,
             oncoming: false,
             keep_right: true,
         }
