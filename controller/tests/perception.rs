@@ -940,37 +940,32 @@ mod perception {
                 "the hidden post is kept"
             );
         }
-        // With no memory, the paper's behaviour: deleted after `delete_misses` scans.
-        let mut p = Perception::new(PerceptionConfig {
-            memory_radius: 0.0,
-            ..cfg.clone()
-        })
-        .expect("config");
-        for _ in 0..10 {
-            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
-            step(&mut p, &ahead, &ranges);
+        // With no memory (the paper's behaviour), or seen in fewer than
+        // `memory_min_hits` scans (no evidence enough to keep): coasting, then deleted
+        // after `delete_misses` scans.
+        let forgetful = [
+            PerceptionConfig {
+                memory_radius: 0.0,
+                ..cfg.clone()
+            },
+            PerceptionConfig {
+                memory_min_hits: 11,
+                ..cfg.clone()
+            },
+        ];
+        for config in forgetful {
+            let mut p = Perception::new(config).expect("config");
+            for _ in 0..10 {
+                let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
+                step(&mut p, &ahead, &ranges);
+            }
+            let mut out = step(&mut p, &away, &empty);
+            assert_eq!(out.obstacles.len(), 1, "coasting");
+            for _ in 1..cfg.delete_misses {
+                out = step(&mut p, &away, &empty);
+            }
+            assert!(out.obstacles.is_empty(), "not remembered");
         }
-        let mut out = step(&mut p, &away, &empty);
-        for _ in 1..cfg.delete_misses {
-            out = step(&mut p, &away, &empty);
-        }
-        assert!(out.obstacles.is_empty());
-        // Seen in fewer than `memory_min_hits` scans: no evidence enough to keep.
-        let mut p = Perception::new(PerceptionConfig {
-            memory_min_hits: 11,
-            ..cfg.clone()
-        })
-        .expect("config");
-        for _ in 0..10 {
-            let ranges = LMS111.ranges(&world, &ahead, &mount, &mut rng, SIGMA);
-            step(&mut p, &ahead, &ranges);
-        }
-        let mut out = step(&mut p, &away, &empty);
-        assert_eq!(out.obstacles.len(), 1, "coasting");
-        for _ in 1..cfg.delete_misses {
-            out = step(&mut p, &away, &empty);
-        }
-        assert!(out.obstacles.is_empty(), "not remembered");
     }
 
     #[test]
