@@ -229,6 +229,25 @@ mod tests {
         }
     }
 
+    /// An enabled THROTTLE_CMD in `gear` at `speed`, no brake.
+    fn drive(gear: ThrottleCmdGear, speed: f64) -> GolfCarMessage {
+        GolfCarMessage::ThrottleCmd(ThrottleCmd {
+            enable: true,
+            gear,
+            brake: 0.0,
+            target_speed: speed,
+            accel_limit: 0.0,
+        })
+    }
+
+    /// An enabled THROTTLE_REPORT with the wheels at `v`.
+    fn wheels(v: f64) -> ThrottleReport {
+        ThrottleReport {
+            enabled: true,
+            wheel_speed: v,
+            ..ThrottleReport::default()
+        }
+    }
     #[test]
     fn a_steering_that_follows_with_lag_is_no_finding_and_a_stuck_one_is() {
         let mut m = ActuatorMonitor::default();
@@ -265,20 +284,7 @@ mod tests {
 
     #[test]
     fn a_drive_that_does_not_slow_is_found_and_braking_is_not() {
-        let throttle = |speed| {
-            GolfCarMessage::ThrottleCmd(ThrottleCmd {
-                enable: true,
-                gear: ThrottleCmdGear::Forward,
-                brake: 0.0,
-                target_speed: speed,
-                accel_limit: 0.0,
-            })
-        };
-        let report = |v| ThrottleReport {
-            enabled: true,
-            wheel_speed: v,
-            ..ThrottleReport::default()
-        };
+        let throttle = |speed| drive(ThrottleCmdGear::Forward, speed);
         // Commanded to stop from 2 m/s, slowing at 1 m/s^2 after 0.2 s: fine.
         let mut m = ActuatorMonitor::default();
         let mut v: f64 = 2.0;
@@ -288,7 +294,7 @@ mod tests {
             if now > 0.2 {
                 v = (v - 0.01).max(0.0);
             }
-            m.on_throttle(now, &report(v));
+            m.on_throttle(now, &wheels(v));
         }
         assert!(m.finding().is_none(), "{:?}", m.finding());
         // The same with the speed held at 2 m/s: found.
@@ -296,7 +302,7 @@ mod tests {
         for k in 0..400 {
             let now = f64::from(k) * 0.01;
             m.commanded(now, &[throttle(0.0)]);
-            m.on_throttle(now, &report(2.0));
+            m.on_throttle(now, &wheels(2.0));
         }
         let f = m.finding().expect("a stuck drive is found");
         assert!(f.reason.contains("does not follow"), "{}", f.reason);
@@ -304,26 +310,13 @@ mod tests {
 
     #[test]
     fn reversing_at_the_commanded_speed_is_no_finding_and_running_away_backwards_is() {
-        let reverse = |speed| {
-            GolfCarMessage::ThrottleCmd(ThrottleCmd {
-                enable: true,
-                gear: ThrottleCmdGear::Reverse,
-                brake: 0.0,
-                target_speed: speed,
-                accel_limit: 0.0,
-            })
-        };
-        let report = |v| ThrottleReport {
-            enabled: true,
-            wheel_speed: v,
-            ..ThrottleReport::default()
-        };
+        let reverse = |speed| drive(ThrottleCmdGear::Reverse, speed);
         // Backing at the commanded 0.5 m/s.
         let mut m = ActuatorMonitor::default();
         for k in 0..400 {
             let now = f64::from(k) * 0.01;
             m.commanded(now, &[reverse(0.5)]);
-            m.on_throttle(now, &report(-0.5));
+            m.on_throttle(now, &wheels(-0.5));
         }
         assert!(m.finding().is_none(), "{:?}", m.finding());
         // Backing at 1.5 m/s against a command of 0.5: found.
@@ -331,7 +324,7 @@ mod tests {
         for k in 0..400 {
             let now = f64::from(k) * 0.01;
             m.commanded(now, &[reverse(0.5)]);
-            m.on_throttle(now, &report(-1.5));
+            m.on_throttle(now, &wheels(-1.5));
         }
         let f = m
             .finding()

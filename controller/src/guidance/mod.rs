@@ -711,13 +711,7 @@ mod tests {
     fn the_paper_scenario_plans_around_the_post_within_the_steering_limit() {
         let cfg = ControllerConfig::default();
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 45f64.to_radians(),
-            v: 0.0,
-            phi: 0.0,
-        };
+        let pose = car_at(0.0, 0.0, 45f64.to_radians(), 0.0);
         let post = Circle {
             x: 19.0,
             y: 8.0,
@@ -753,13 +747,7 @@ mod tests {
     fn an_obstacle_on_the_goal_means_stop() {
         let cfg = ControllerConfig::default();
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.4,
-            v: 0.0,
-            phi: 0.0,
-        };
+        let pose = car_at(0.0, 0.0, 0.4, 0.0);
         let blocker = Circle {
             x: 30.0,
             y: 15.0,
@@ -865,13 +853,7 @@ mod tests {
         cfg.mission.goal_x = 35.0;
         cfg.mission.goal_y = 0.0;
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 8.0,
-            y: 0.0,
-            theta: 0.0,
-            v: 2.0,
-            phi: 0.0,
-        };
+        let pose = car_at(8.0, 0.0, 0.0, 2.0);
         // At 2 m/s the car is at x = 16 in 4 s, when the obstacle crosses y = 0.
         let crossing = Circle {
             x: 16.0,
@@ -922,13 +904,7 @@ mod tests {
         let mut nav = Navigator::new(&cfg).expect("navigator");
         // The line points at 26.6 degrees; the car at 170 degrees (143 off, to the
         // left): the short way round is a right turn.
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 170f64.to_radians(),
-            v: 0.0,
-            phi: 0.0,
-        };
+        let pose = car_at(0.0, 0.0, 170f64.to_radians(), 0.0);
         let req = nav.request(0.0, &pose, &[]);
         let align = req.align.clone().expect("align");
         assert!(!align.prefer_left);
@@ -1013,13 +989,7 @@ mod tests {
         let (cfg, wall) = dead_end(4.5);
         let pc = &cfg.planner;
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let mut pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0,
-            v: 0.0,
-            phi: 0.0,
-        };
+        let mut pose = car_at(0.0, 0.0, 0.0, 0.0);
         let mut now = 0.0;
         for round in 1..=pc.max_reversals {
             // No forward path: a controlled stop until it has stood recover_after_s.
@@ -1086,13 +1056,7 @@ mod tests {
         let (_, behind) = dead_end(-4.0);
         walls.extend(behind);
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0,
-            v: 0.0,
-            phi: 0.0,
-        };
+        let pose = car_at(0.0, 0.0, 0.0, 0.0);
         for k in 0..300 {
             let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &walls);
             assert!(matches!(g, Guidance::Stop { .. }), "{g:?}");
@@ -1161,13 +1125,7 @@ mod tests {
     fn a_long_route_is_planned_towards_a_local_goal_on_it() {
         let cfg = long_route();
         let mut nav = Navigator::new(&cfg).expect("navigator");
-        let pose = Pose {
-            x: 0.0,
-            y: 0.0,
-            theta: 0.0,
-            v: 0.0,
-            phi: 0.0,
-        };
+        let pose = car_at(0.0, 0.0, 0.0, 0.0);
         let req = nav.request(0.0, &pose, &[]);
         assert!((req.problem.goal.x - cfg.planner.horizon_m).abs() < 1e-9);
         assert_eq!(req.problem.goal.theta, 0.0, "the route's heading there");

@@ -290,12 +290,35 @@ impl PointTrack {
     /// The velocity to report at `stamp`: zero unless significant for
     /// `moving_confirm_s`.
     fn reported_velocity(&self, stamp: f64, cfg: &PerceptionConfig) -> [f64; 2] {
-        match self.moving_since {
-            Some(since) if stamp - since >= cfg.moving_confirm_s - 1e-9 => {
-                [self.state[2], self.state[3]]
-            }
-            _ => [0.0, 0.0],
-        }
+        confirmed_velocity(
+            self.moving_since,
+            [self.state[2], self.state[3]],
+            stamp,
+            cfg,
+        )
+    }
+}
+
+/// `velocity` once it has been significant since `moving_since` for
+/// `moving_confirm_s` at `stamp`, else zero.
+fn confirmed_velocity(
+    moving_since: Option<f64>,
+    velocity: [f64; 2],
+    stamp: f64,
+    cfg: &PerceptionConfig,
+) -> [f64; 2] {
+    match moving_since {
+        Some(since) if stamp - since >= cfg.moving_confirm_s - 1e-9 => velocity,
+        _ => [0.0, 0.0],
+    }
+}
+
+/// How far from the vehicle an obstacle moving at `velocity` is reported.
+fn reach(velocity: [f64; 2], cfg: &PerceptionConfig) -> f64 {
+    if velocity != [0.0, 0.0] {
+        cfg.moving_detection_radius.max(cfg.detection_radius)
+    } else {
+        cfg.detection_radius
     }
 }
 
@@ -408,10 +431,7 @@ impl WallTrack {
     /// The velocity to report at `stamp`: zero unless above the dead band (and
     /// `WALL_MIN_SPEED`) for `moving_confirm_s`.
     fn reported_velocity(&self, stamp: f64, cfg: &PerceptionConfig) -> [f64; 2] {
-        match self.moving_since {
-            Some(since) if stamp - since >= cfg.moving_confirm_s - 1e-9 => self.velocity,
-            _ => [0.0, 0.0],
-        }
+        confirmed_velocity(self.moving_since, self.velocity, stamp, cfg)
     }
 }
 
@@ -755,12 +775,7 @@ impl Perception {
             }
             let (x, y) = (t.state[0], t.state[1]);
             let [vx, vy] = t.reported_velocity(stamp, cfg);
-            let radius = if vx != 0.0 || vy != 0.0 {
-                cfg.moving_detection_radius.max(cfg.detection_radius)
-            } else {
-                cfg.detection_radius
-            };
-            if !within_radius(x, y, t.radius, radius) {
+            if !within_radius(x, y, t.radius, reach([vx, vy], cfg)) {
                 continue;
             }
             obstacles.push(TrackedObstacle {
@@ -803,11 +818,7 @@ impl Perception {
                 });
             }
             let [vx, vy] = w.reported_velocity(stamp, cfg);
-            let reach = if vx != 0.0 || vy != 0.0 {
-                cfg.moving_detection_radius.max(cfg.detection_radius)
-            } else {
-                cfg.detection_radius
-            };
+            let reach = reach([vx, vy], cfg);
             let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, cfg);
             for (part, c) in centres.iter().enumerate() {
                 if !within_radius(c[0], c[1], radius, reach) {
