@@ -127,8 +127,13 @@ pub struct PlannerConfig {
     pub reverse_distance_m: f64,
     /// Speed of a reversal (a magnitude: THROTTLE_CMD in gear R), m/s.
     pub reverse_speed: f64,
-    /// Reversals per mission; then (or with no clear path backwards) a controlled stop.
+    /// Reversals allowed before progress; then (or with no clear path backwards) a
+    /// controlled stop.
     pub max_reversals: u32,
+    /// Progress along the route past the place of the last reversal that gives the
+    /// car its `max_reversals` again (a later dead end on a long route is a new one),
+    /// metres.
+    pub reversal_reset_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -155,6 +160,7 @@ impl Default for PlannerConfig {
             reverse_distance_m: 4.0,
             reverse_speed: 0.5,
             max_reversals: 2,
+            reversal_reset_m: 10.0,
         }
     }
 }
@@ -541,6 +547,7 @@ impl ControllerConfig {
             10.0,
             "",
         )?;
+        positive_up_to(&at("reversal_reset_m"), pc.reversal_reset_m, 1000.0, "m")?;
 
         let f = &self.follower;
         let at = |k: &'static str| FieldPath::of(&["follower", k]);

@@ -142,6 +142,8 @@ fn the_recovery_fields_are_bounded() {
         ("reverse_distance_m", "12.0"),
         ("reverse_speed", "0.0"),
         ("max_reversals", "11"),
+        ("reversal_reset_m", "0.0"),
+        ("reversal_reset_m", "nan"),
     ] {
         let e = refused(&format!("[planner]\n{key} = {value}\n"));
         assert_eq!(e.field, format!("planner.{key}"), "{e}");

@@ -62,9 +62,10 @@
 //!   `reverse_speed` in gear R ([`Guidance::Reverse`]) along a straight or gently
 //!   curved arc checked against the obstacles perception reports ([`Reverse`]; the
 //!   laser looks forward, so the way is kept short and slow), stopping early when the
-//!   rest of it is no longer clear, then replans. At most `max_reversals` times per
-//!   mission; then, or with no clear way back, a controlled stop whose reason says so
-//!   ("no forward path after 2 reversals").
+//!   rest of it is no longer clear, then replans. At most `max_reversals` times until
+//!   the car has made `reversal_reset_m` of progress past the place of the last one;
+//!   then, or with no clear way back, a controlled stop whose reason says so ("no
+//!   forward path after 2 reversals").
 //! - Real actuators: the follower and the planner work from the pose propagated over
 //!   the steering's calibrated dead time with the commands still on their way
 //!   ([`Navigator::follow_ahead`]; `Controller::ahead`), while arrival, progress and
@@ -166,6 +167,11 @@ pub struct Navigator {
     reversing: Option<Reverse>,
     /// Reversals begun this mission.
     reversals: u32,
+    /// Reversals begun since the car last made `reversal_reset_m` of progress past
+    /// the place of the last one (those `max_reversals` bounds).
+    recent_reversals: u32,
+    /// Route progress where the last reversal began, metres.
+    reversed_at: f64,
     /// The last try at recovery found no clear way back.
     no_way_back: bool,
     pub plans: Vec<PlanRecord>,
@@ -194,6 +200,8 @@ impl Navigator {
             planner_error: None,
             reversing: None,
             reversals: 0,
+            recent_reversals: 0,
+            reversed_at: 0.0,
             no_way_back: false,
             plans: Vec::new(),
         })
@@ -476,7 +484,7 @@ impl Navigator {
         }
     }
 
-    /// Reversals begun so far.
+    /// Reversals begun this mission.
     pub fn reversals(&self) -> u32 {
         self.reversals
     }
@@ -499,6 +507,9 @@ impl Navigator {
             }
             return;
         }
+        if self.progress - self.reversed_at >= pc.reversal_reset_m {
+            self.recent_reversals = 0;
+        }
         // A blocked goal is no dead end: backing away from it leads nowhere nearer.
         let stuck = self.active.is_none()
             && !self.goal_blocked
@@ -508,7 +519,7 @@ impl Navigator {
                 .infeasible_since
                 .is_some_and(|t| now - t >= pc.recover_after_s)
             && pose.v.abs() < STANDING;
-        if !stuck || self.reversals >= pc.max_reversals {
+        if !stuck || self.recent_reversals >= pc.max_reversals {
             return;
         }
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
@@ -527,6 +538,8 @@ impl Navigator {
             Some(r) => {
                 self.reversing = Some(r);
                 self.reversals += 1;
+                self.recent_reversals += 1;
+                self.reversed_at = s;
                 self.infeasible_since = None;
                 self.no_way_back = false;
             }
@@ -595,8 +608,8 @@ impl Navigator {
                 format!(
                     "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
                 )
-            } else if self.reversals > 0 && self.reversals >= pc.max_reversals {
-                let n = self.reversals;
+            } else if self.recent_reversals > 0 && self.recent_reversals >= pc.max_reversals {
+                let n = self.recent_reversals;
                 format!(
                     "no forward path after {n} reversal{}",
                     if n == 1 { "" } else { "s" }
@@ -1047,6 +1060,34 @@ mod tests {
             );
         }
         assert_eq!(nav.reversals(), pc.max_reversals);
+        // Progress past the place of the last reversal gives them back: the way now
+        // open, the car drives on, and a new dead end further along the route is
+        // backed out of again.
+        let x_end = pc.reversal_reset_m + 1.0;
+        while pose.x < x_end {
+            now += 0.1;
+            pose.x += 0.1;
+            pose.v = 1.0;
+            tick(&mut nav, now, &pose, &[]);
+            if pose.x < pc.reversal_reset_m - 0.2 {
+                assert_eq!(nav.recent_reversals, pc.max_reversals, "at x = {}", pose.x);
+            }
+        }
+        assert_eq!(nav.recent_reversals, 0);
+        let (_, further) = dead_end(x_end + 4.5);
+        pose.v = 0.0;
+        let stand_from = now;
+        while !matches!(
+            tick(&mut nav, now, &pose, &further),
+            Guidance::Reverse { .. }
+        ) {
+            now += 0.01;
+            // Found infeasible at the next replanning, then stood recover_after_s.
+            let limit = pc.replan_period_s + pc.recover_after_s + 0.1;
+            assert!(now - stand_from < limit, "it reverses again");
+        }
+        assert_eq!(nav.recent_reversals, 1);
+        assert_eq!(nav.reversals(), pc.max_reversals + 1);
     }
 
     #[test]
