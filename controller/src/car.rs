@@ -28,6 +28,10 @@ pub struct Car {
     /// the controller propagates the state over before planning and steering).
     pub steer_dead_time_s: f64,
     pub steer_time_constant_s: f64,
+    /// The speed loop's (throttle/brake ECU's) dead time and first-order time
+    /// constant, seconds (how far the car rolls on after a lower speed is commanded).
+    pub speed_dead_time_s: f64,
+    pub speed_time_constant_s: f64,
 }
 
 /// The paper's car.
@@ -44,4 +48,6 @@ pub const PAPER_CAR: Car = Car {
     laser_yaw_deg: 0.0,
     steer_dead_time_s: 0.02,
     steer_time_constant_s: 0.08,
+    speed_dead_time_s: 0.05,
+    speed_time_constant_s: 0.4,
 };

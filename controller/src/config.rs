@@ -44,6 +44,20 @@ pub struct Vehicle {
     pub steer_dead_time_s: f64,
     /// The steering actuator's first-order time constant, seconds (the same prediction).
     pub steer_time_constant_s: f64,
+    /// The speed loop's dead time and first-order time constant, seconds, as measured
+    /// on the car: a car at speed v rolls on about v times their sum after a lower
+    /// speed is commanded, so every stop (the path's end, the goal, the end of a
+    /// reversal) is commanded that much earlier.
+    pub speed_dead_time_s: f64,
+    pub speed_time_constant_s: f64,
+}
+
+impl Vehicle {
+    /// How far the car at speed `v` rolls on before a lower speed commanded now takes
+    /// hold: the speed loop's dead time and time constant at that speed, metres.
+    pub fn coast_m(&self, v: f64) -> f64 {
+        v.abs() * (self.speed_dead_time_s + self.speed_time_constant_s)
+    }
 }
 
 impl Default for Vehicle {
@@ -65,6 +79,8 @@ impl Default for Vehicle {
             laser_yaw_deg: car.laser_yaw_deg,
             steer_dead_time_s: car.steer_dead_time_s,
             steer_time_constant_s: car.steer_time_constant_s,
+            speed_dead_time_s: car.speed_dead_time_s,
+            speed_time_constant_s: car.speed_time_constant_s,
         }
     }
 }
@@ -409,6 +425,14 @@ impl ControllerConfig {
             v.steer_time_constant_s,
             0.0,
             2.0,
+            "s",
+        )?;
+        within(&at("speed_dead_time_s"), v.speed_dead_time_s, 0.0, 5.0, "s")?;
+        within(
+            &at("speed_time_constant_s"),
+            v.speed_time_constant_s,
+            0.0,
+            5.0,
             "s",
         )?;
 

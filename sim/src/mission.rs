@@ -34,10 +34,12 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.laser_x = scenario.laser.mount_x;
     v.laser_y = scenario.laser.mount_y;
     v.laser_yaw_deg = scenario.laser.mount_yaw_deg;
-    // The steering actuator's timing is calibration a field team measures (a step
-    // response); its sensor bias is not: the controller estimates that itself.
+    // The actuators' timing is calibration a field team measures (step responses);
+    // the steering sensor's bias is not: the controller estimates that itself.
     v.steer_dead_time_s = scenario.steering.dead_time_s;
     v.steer_time_constant_s = scenario.steering.time_constant_s;
+    v.speed_dead_time_s = scenario.throttle.dead_time_s;
+    v.speed_time_constant_s = scenario.throttle.time_constant_s;
     cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
     if let Some(r) = scenario.controller.detection_radius {
         cfg.perception.detection_radius = r;

@@ -499,7 +499,8 @@ impl Navigator {
         if let Some(r) = &mut self.reversing {
             if !r.done {
                 let rest = r.rest(pose.x, pose.y, pose.theta);
-                r.done = rest.distance <= 0.0 || !rest.clear(obstacles, r0);
+                r.done =
+                    rest.distance <= self.cfg.vehicle.coast_m(pose.v) || !rest.clear(obstacles, r0);
             }
             if r.done && pose.v.abs() < STANDING {
                 self.reversing = None;
@@ -637,6 +638,9 @@ impl Navigator {
         // obstacles the plan's timing matters: x must advance at the planned w1, so the
         // speed along the path is w1 sqrt(1 + y'^2).
         let f = &self.cfg.follower;
+        // Stops are commanded early by what the car rolls on while its speed loop
+        // catches up.
+        let coast = self.cfg.vehicle.coast_m(pose.v);
         let curvature = path.curvature(x).abs().max(1e-6);
         let pace = if self.paced {
             t.w1() * path.dy_dx(x).hypot(1.0)
@@ -656,10 +660,10 @@ impl Navigator {
                     .unwrap_or(f64::INFINITY),
             )
             .min((f.max_lateral_accel / curvature).sqrt())
-            .min((2.0 * f.decel * to_goal).sqrt())
+            .min((2.0 * f.decel * (to_goal - coast).max(0.0)).sqrt())
             // The path's end is where the next replanning may find no way on (a local
             // goal before a blocked goal or a wall): the car can always stop there.
-            .min((2.0 * f.decel * (path.x_f() - x).max(0.0)).sqrt())
+            .min((2.0 * f.decel * (path.x_f() - x - coast).max(0.0)).sqrt())
             .min(self.cfg.vehicle.max_speed);
         Guidance::Drive {
             steer,
@@ -1026,19 +1030,17 @@ mod tests {
                     speed: pc.reverse_speed
                 }
             );
+            // It brakes what the speed loop rolls on before the end of the way.
+            let braked = pc.reverse_distance_m - cfg.vehicle.coast_m(pc.reverse_speed);
             while nav.reversing.is_some_and(|r| !r.done) {
                 now += 0.01;
                 pose.x -= pc.reverse_speed * 0.01;
                 pose.v = -pc.reverse_speed;
                 assert!(!nav.replan_due(now, &pose));
                 nav.recover(now, &pose, &wall);
-                assert!(pose.x > -(pc.reverse_distance_m + 0.1) * f64::from(round));
+                assert!(pose.x > -(braked + 0.1) * f64::from(round));
             }
-            assert!(
-                pose.x < -(pc.reverse_distance_m - 0.1) * f64::from(round),
-                "{}",
-                pose.x
-            );
+            assert!(pose.x < -(braked - 0.1) * f64::from(round), "{}", pose.x);
             // Braking to a stand, then replanning at once.
             assert!(matches!(
                 nav.follow(&pose),
@@ -1334,5 +1336,34 @@ mod tests {
         }
         // Without the cart the goal is free.
         assert!(!nav.request(0.0, &pose, &[]).goal_blocked);
+    }
+
+    #[test]
+    fn stops_are_commanded_early_by_what_a_slow_speed_loop_rolls_on() {
+        // Approaching the goal at 1.5 m/s, 1.5 m from it: the command lets the car
+        // stop there after rolling on for the speed loop's dead time and time constant.
+        let speed_at = |dead: f64, constant: f64| {
+            let mut cfg = east_to(30.0);
+            cfg.vehicle.speed_dead_time_s = dead;
+            cfg.vehicle.speed_time_constant_s = constant;
+            let mut nav = Navigator::new(&cfg).expect("navigator");
+            let pose = car_at(28.5, 0.0, 0.0, 1.5);
+            drive_east(&mut nav, 28);
+            nav.accept(solve(&nav.request(0.0, &pose, &[])));
+            match nav.follow(&pose) {
+                Guidance::Drive { speed, .. } => (speed, cfg),
+                other => panic!("expected to drive, got {other:?}"),
+            }
+        };
+        let (quick, cfg) = speed_at(0.0, 0.0);
+        let (slow, _) = speed_at(0.1, 0.3);
+        let to_goal = 1.5;
+        let decel = cfg.follower.decel;
+        assert!(
+            (quick - (2.0 * decel * to_goal).sqrt()).abs() < 1e-9,
+            "{quick}"
+        );
+        let expected = (2.0 * decel * (to_goal - 1.5 * 0.4)).sqrt();
+        assert!((slow - expected).abs() < 1e-9, "{slow} vs {expected}");
     }
 }

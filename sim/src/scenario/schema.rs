@@ -181,9 +181,10 @@ pub struct ThrottleConfig {
 impl Default for ThrottleConfig {
     /// A 48 V golf car drive.
     fn default() -> Self {
+        let car = ugv_controller::car::PAPER_CAR;
         ThrottleConfig {
-            dead_time_s: 0.05,
-            time_constant_s: 0.4,
+            dead_time_s: car.speed_dead_time_s,
+            time_constant_s: car.speed_time_constant_s,
             max_accel: 1.5,
             max_decel: 2.5,
             brake_decel: 4.0,
