@@ -245,6 +245,14 @@ fn solve_towards(
     for &pace in &pacing.speeds {
         let margin = pacing.time_margin + pacing.schedule_slip(pace);
         let mut problem = p.clone();
+        // The paces come fastest first, and a slower one loses more time: once that
+        // alone scores no better than the best path found, none further on can win.
+        if best
+            .as_ref()
+            .is_some_and(|b| pacing.score(0.0, pace, fastest) >= b.0)
+        {
+            break;
+        }
         problem.t_f = p.t_k + span / pace;
         problem.obstacles = p
             .obstacles
