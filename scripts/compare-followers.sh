@@ -15,7 +15,8 @@ seeds=${SEEDS:-20}
 cd "$(dirname "$0")/.."
 # The report's figures need matplotlib (not needed by the tests, so installed here).
 python3 -c 'import matplotlib' 2>/dev/null || python3 -m pip install --quiet 'matplotlib==3.11.2'
-cargo build --release --locked -p ugv-sim -p ugv-controller --bins
+# The workspace, not -p: another feature set would rebuild what the tests build.
+cargo build --release --locked --workspace --bins
 bin="${CARGO_TARGET_DIR:-target}/release"
 out=results/comparison
 rm -rf "$out"
