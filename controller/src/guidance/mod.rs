@@ -287,6 +287,12 @@ impl Navigator {
         let pc = &self.cfg.planner;
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let span = frame.length - px;
+        // Moving obstacles keep the planning circle's clearance in every tier: the
+        // passage tier's narrower circle is checked with the car's rectangle against
+        // the static obstacles only, and a cart or a walker met in a passage must come
+        // no nearer the rear axle than the planning circle allows (the nose is 2 m
+        // ahead of it).
+        let moving_inflation = (self.wide().r0 - r0).max(0.0);
         let mut any_moving = false;
         let problem = PlanProblem {
             state: planner::VehicleState {
@@ -318,7 +324,7 @@ impl Navigator {
                         return planner::Obstacle {
                             x,
                             y,
-                            radius: o.radius + pc.moving_margin,
+                            radius: o.radius + pc.moving_margin + moving_inflation,
                             vx,
                             vy,
                         };
