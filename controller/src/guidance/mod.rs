@@ -644,9 +644,10 @@ impl Navigator {
         // obstacles the plan's timing matters: x must advance at the planned w1, so the
         // speed along the path is w1 sqrt(1 + y'^2).
         let f = &self.cfg.follower;
-        // Stops are commanded early by what the car rolls on while its speed loop
-        // catches up.
+        // The speed that stops the car within `d`, commanded early by what it rolls on
+        // while its speed loop catches up.
         let coast = self.cfg.vehicle.coast_m(pose.v);
+        let stop_within = |d: f64| (2.0 * f.decel * (d - coast).max(0.0)).sqrt();
         let curvature = path.curvature(x).abs().max(1e-6);
         let pace = if self.paced {
             t.w1() * path.dy_dx(x).hypot(1.0)
@@ -666,10 +667,10 @@ impl Navigator {
                     .unwrap_or(f64::INFINITY),
             )
             .min((f.max_lateral_accel / curvature).sqrt())
-            .min((2.0 * f.decel * (to_goal - coast).max(0.0)).sqrt())
+            .min(stop_within(to_goal))
             // The path's end is where the next replanning may find no way on (a local
             // goal before a blocked goal or a wall): the car can always stop there.
-            .min((2.0 * f.decel * (path.x_f() - x - coast).max(0.0)).sqrt())
+            .min(stop_within(path.x_f() - x))
             .min(self.cfg.vehicle.max_speed);
         Guidance::Drive {
             steer,

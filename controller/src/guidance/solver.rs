@@ -243,8 +243,6 @@ fn solve_towards(
     let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
     let mut best: Option<(f64, Chosen)> = None;
     for &pace in &pacing.speeds {
-        let margin = pacing.time_margin + pacing.schedule_slip(pace);
-        let mut problem = p.clone();
         // The paces come fastest first, and a slower one loses more time: once that
         // alone scores no better than the best path found, none further on can win.
         if best
@@ -253,6 +251,8 @@ fn solve_towards(
         {
             break;
         }
+        let margin = pacing.time_margin + pacing.schedule_slip(pace);
+        let mut problem = p.clone();
         problem.t_f = p.t_k + span / pace;
         problem.obstacles = p
             .obstacles

@@ -386,18 +386,11 @@ impl WallTrack {
             return;
         }
         self.anchor = (*new, stamp);
-        let len = old.length();
-        if len <= 0.0 {
-            return;
-        }
-        let Some(offset) = normal_offset(&old, new) else {
+        let (Some(u), Some(offset)) = (direction(&old), normal_offset(&old, new)) else {
             self.normal_speed = None;
             return;
         };
-        let n = [
-            -(old.p1[1] - old.p0[1]) / len,
-            (old.p1[0] - old.p0[0]) / len,
-        ];
+        let n = [-u[1], u[0]];
         let speed = offset / dt;
         if speed.abs() > WALL_MAX_SPEED {
             self.normal_speed = None;
@@ -877,6 +870,12 @@ impl Perception {
     }
 }
 
+/// The unit direction of `s` from p0 to p1; `None` for a segment of no length.
+fn direction(s: &SegmentMeasurement) -> Option<[f64; 2]> {
+    let len = s.length();
+    (len > 0.0).then(|| [(s.p1[0] - s.p0[0]) / len, (s.p1[1] - s.p0[1]) / len])
+}
+
 /// A point track this near a static wall's line (beyond the two's radii), moving along
 /// it, is the wall's end (or a piece of it between gaps) sliding along as more or less
 /// of the wall comes into view past an occluder, not an object: it is reported
@@ -889,15 +888,13 @@ const SLIDING_EDGE_MIN_COS: f64 = 0.9;
 /// Whether a point track at `p` of `radius` moving at `velocity` is the sliding edge of
 /// `wall` (see [`SLIDING_EDGE_GAP`]).
 fn slides_along(wall: &SegmentMeasurement, p: [f64; 2], radius: f64, velocity: [f64; 2]) -> bool {
-    let len = wall.length();
     let speed = velocity[0].hypot(velocity[1]);
-    if len <= 0.0 || speed == 0.0 {
+    if speed == 0.0 {
         return false;
     }
-    let u = [
-        (wall.p1[0] - wall.p0[0]) / len,
-        (wall.p1[1] - wall.p0[1]) / len,
-    ];
+    let Some(u) = direction(wall) else {
+        return false;
+    };
     let along = (velocity[0] * u[0] + velocity[1] * u[1]).abs() / speed;
     let across = (-(p[0] - wall.p0[0]) * u[1] + (p[1] - wall.p0[1]) * u[0]).abs();
     along >= SLIDING_EDGE_MIN_COS && across <= wall.half_thickness + radius + SLIDING_EDGE_GAP
@@ -910,11 +907,8 @@ fn slides_along(wall: &SegmentMeasurement, p: [f64; 2], radius: f64, velocity: [
 /// direction a degree or two off turns that slide into an apparent normal motion
 /// (a fence seen through a gate, 3 m of it more each 0.2 s, moved at 0.5 m/s).
 fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f64> {
+    let u = direction(old)?;
     let len = old.length();
-    if len <= 0.0 {
-        return None;
-    }
-    let u = [(old.p1[0] - old.p0[0]) / len, (old.p1[1] - old.p0[1]) / len];
     let along = |p: [f64; 2]| (p[0] - old.p0[0]) * u[0] + (p[1] - old.p0[1]) * u[1];
     let across = |p: [f64; 2]| -(p[0] - old.p0[0]) * u[1] + (p[1] - old.p0[1]) * u[0];
     let (a0, a1) = (along(new.p0), along(new.p1));
@@ -975,17 +969,21 @@ mod tests {
         assert!(tentative.dead(&cfg));
     }
 
-    #[test]
-    fn wall_association_gates() {
-        let cfg = PerceptionConfig::default();
-        let seg = |p0: [f64; 2], p1: [f64; 2]| SegmentMeasurement {
+    /// A thin wall piece from p0 to p1, fitted to 10 points.
+    fn seg(p0: [f64; 2], p1: [f64; 2]) -> SegmentMeasurement {
+        SegmentMeasurement {
             p0,
             p1,
             half_thickness: 0.0,
             rms: 0.0,
             points: 10,
             cluster: 0,
-        };
+        }
+    }
+
+    #[test]
+    fn wall_association_gates() {
+        let cfg = PerceptionConfig::default();
         let old = seg([0.0, 0.0], [5.0, 0.0]);
         assert!(wall_cost(&old, &seg([4.0, 0.1], [8.0, 0.1]), &cfg).is_some());
         assert!(wall_cost(&old, &seg([8.0, 0.1], [4.0, 0.1]), &cfg).is_some());
@@ -996,14 +994,6 @@ mod tests {
 
     #[test]
     fn a_wall_coming_into_view_is_measured_where_both_fits_see_it() {
-        let seg = |p0: [f64; 2], p1: [f64; 2]| SegmentMeasurement {
-            p0,
-            p1,
-            half_thickness: 0.0,
-            rms: 0.0,
-            points: 10,
-            cluster: 0,
-        };
         // A fence along y = 0 fitted 2 degrees off, 3 m more of it in view next time:
         // it has not moved where both fits see it.
         let tilt = 2f64.to_radians().tan();
@@ -1023,12 +1013,8 @@ mod tests {
     #[test]
     fn a_point_sliding_along_a_static_wall_is_its_edge_and_one_crossing_it_is_not() {
         let fence = SegmentMeasurement {
-            p0: [20.0, -25.0],
-            p1: [20.0, -1.0],
             half_thickness: 0.1,
-            rms: 0.0,
-            points: 40,
-            cluster: 0,
+            ..seg([20.0, -25.0], [20.0, -1.0])
         };
         // On the fence's line, racing along it: the edge of what is in view.
         assert!(slides_along(&fence, [20.06, -6.94], 0.2, [-0.02, -5.49]));
