@@ -136,6 +136,15 @@ const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
 /// Below this speed the car stands (for recovery, and at the end of a reversal), m/s.
 pub const STANDING: f64 = 0.05;
+/// A path being followed is kept past a replanning that finds none only with the car
+/// this near it sideways (metres) and in heading (radians), and this much of it left
+/// (metres): a path whose end is near is driven to its end and stopped at, so that
+/// recovery can begin ([`Navigator::recover`]).
+const KEEP_OFF_PATH: f64 = 0.3;
+const KEEP_HEADING: f64 = 0.2;
+const KEEP_LEFT: f64 = 3.0;
+/// Step along a kept path at which it is checked against the obstacles, metres.
+const KEEP_CHECK_STEP: f64 = 0.25;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -444,7 +453,48 @@ impl Navigator {
             goal_blocked,
             pacing,
             align,
+            current_holds: self.current_path_holds(pose, obstacles),
         }
+    }
+
+    /// Whether the path being followed may be kept when a replanning finds no feasible
+    /// one: it was planned among static obstacles only, not through a passage nor
+    /// while turning to align; the car is on it (within [`KEEP_OFF_PATH`] and
+    /// [`KEEP_HEADING`]); at least [`KEEP_LEFT`] of it is left; and the rest of it
+    /// clears every obstacle now reported by the planning circle, as planned (none of
+    /// them moving). A car whose replanning needs a little more steering than allowed
+    /// (a tracking error, a sensor bias) then drives on along a path that holds, where
+    /// it would otherwise stop at once.
+    fn current_path_holds(&self, pose: &Pose, obstacles: &[Circle]) -> bool {
+        let Some(t) = &self.active else {
+            return false;
+        };
+        if self.paced
+            || self.passage
+            || self.aligning.is_some()
+            || obstacles.iter().any(|o| o.vx != 0.0 || o.vy != 0.0)
+        {
+            return false;
+        }
+        let path = t.path();
+        let (px, py) = self.frame.to_path(pose.x, pose.y);
+        let x = px.clamp(path.x_k(), path.x_f());
+        let off = (py - path.y(x)).abs();
+        let heading = wrap(pose.theta - self.frame.angle - path.heading(x)).abs();
+        let left = path.x_f() - x;
+        if off > KEEP_OFF_PATH || heading > KEEP_HEADING || left < KEEP_LEFT {
+            return false;
+        }
+        let r0 = self.wide().r0;
+        let n = (left / KEEP_CHECK_STEP).ceil() as usize;
+        (0..=n).all(|j| {
+            let qx = x + left * j as f64 / n as f64;
+            let (wx, wy) = self.frame.to_world(qx, path.y(qx));
+            obstacles.iter().all(|o| {
+                let radius = clip_to_start(o.radius, o.x, o.y, pose.x, pose.y, r0);
+                (wx - o.x).hypot(wy - o.y) > radius + r0
+            })
+        })
     }
 
     /// Whether a replanning is due at `now` from `pose` (not while reversing).
@@ -466,7 +516,6 @@ impl Navigator {
         if self.reversing.is_some() {
             return;
         }
-        self.frame = outcome.frame;
         match outcome.result {
             Ok((trajectory, record)) => {
                 if trajectory.is_some() {
@@ -474,15 +523,19 @@ impl Navigator {
                 } else {
                     self.infeasible_since.get_or_insert(outcome.time);
                 }
-                self.active = trajectory;
-                self.paced = record.moving;
-                self.passage = record.passage;
-                self.goal_blocked = record.goal_blocked;
-                self.aligning = record.align;
+                if !record.kept {
+                    self.frame = outcome.frame;
+                    self.active = trajectory;
+                    self.paced = record.moving;
+                    self.passage = record.passage;
+                    self.goal_blocked = record.goal_blocked;
+                    self.aligning = record.align;
+                }
                 self.planner_error = None;
                 self.plans.push(record);
             }
             Err(e) => {
+                self.frame = outcome.frame;
                 self.active = None;
                 self.aligning = None;
                 self.planner_error = Some(e);
@@ -729,6 +782,52 @@ mod tests {
         nav.issued(0.0);
         nav.accept(solve(&nav.request(0.0, pose, obstacles)));
         nav.follow(pose)
+    }
+
+    #[test]
+    fn a_replanning_that_finds_no_path_keeps_the_path_being_followed_while_it_holds() {
+        let cfg = east_to(40.0);
+        let post_beside = post(10.0, 4.0, 0.5);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let start = car_at(0.0, 0.0, 0.0, 2.0);
+        assert!(matches!(
+            replan_and_follow(&mut nav, &start, &[post_beside]),
+            Guidance::Drive { .. }
+        ));
+        // On the path, 0.1 m off it: a replanning allowed no steering finds nothing.
+        let pose = car_at(2.0, 0.1, 0.0, 2.0);
+        nav.follow(&pose);
+        let starved = |nav: &Navigator, obstacles: &[Circle]| {
+            let mut req = nav.request(0.5, &pose, obstacles);
+            req.steer_limit = 1e-6;
+            req.detours.clear();
+            req.passages.clear();
+            solve(&req)
+        };
+        let outcome = starved(&nav, &[post_beside]);
+        let Ok((None, record)) = &outcome.result else {
+            panic!("a path with no steering: {:?}", outcome.result);
+        };
+        assert!(record.kept && !record.feasible, "{record:?}");
+        nav.accept(outcome);
+        assert!(matches!(nav.follow(&pose), Guidance::Drive { .. }));
+        // A post now reported on the rest of the path: it is not kept, the car stops.
+        let on_path = post(15.0, 0.0, 0.5);
+        let outcome = starved(&nav, &[post_beside, on_path]);
+        assert!(matches!(&outcome.result, Ok((None, r)) if !r.kept));
+        nav.accept(outcome);
+        assert!(matches!(nav.follow(&pose), Guidance::Stop { .. }));
+        // Nor with the car off it, nor with a moving obstacle in view anywhere.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        replan_and_follow(&mut nav, &start, &[post_beside]);
+        let off = car_at(2.0, 0.6, 0.0, 2.0);
+        assert!(!nav.current_path_holds(&off, &[post_beside]));
+        let walker = Circle {
+            vx: 1.0,
+            ..post(30.0, 20.0, 0.3)
+        };
+        assert!(!nav.current_path_holds(&pose, &[post_beside, walker]));
+        assert!(nav.current_path_holds(&pose, &[post_beside]));
     }
 
     #[test]

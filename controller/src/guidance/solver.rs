@@ -37,6 +37,10 @@ pub struct PlanRecord {
     /// passage margin of it): the car can only stop short of it.
     #[serde(default)]
     pub goal_blocked: bool,
+    /// No feasible path was found, and the path being followed was kept: it still
+    /// clears every obstacle now reported ([`PlanRequest::current_holds`]).
+    #[serde(default)]
+    pub kept: bool,
 }
 
 /// One replanning to do: the problem in the planning frame and the steering limit.
@@ -63,6 +67,10 @@ pub struct PlanRequest {
     pub pacing: Option<Pacing>,
     /// Set when the car heads too far from the line: turn towards the goal first.
     pub align: Option<Align>,
+    /// The path being followed may be kept if this replanning finds none: planned
+    /// among static obstacles, the car on it, and the rest of it clear of every
+    /// obstacle now reported (`Navigator::current_path_holds`).
+    pub current_holds: bool,
 }
 
 /// A finished replanning: the path (None when no feasible path exists) and its
@@ -92,8 +100,14 @@ pub struct PlanOutcome {
 /// the first with one is taken, in its own frame ([`PlanOutcome::frame`]).
 pub fn solve(req: &PlanRequest) -> PlanOutcome {
     let mut outcome = solve_in_order(req);
-    if let Ok((_, record)) = &mut outcome.result {
+    if let Ok((trajectory, record)) = &mut outcome.result {
         record.goal_blocked = req.goal_blocked;
+        // A replanning on the edge of feasibility (the steering it needs just over the
+        // limit) must not stop a car on a path that still holds.
+        record.kept = trajectory.is_none()
+            && record.align.is_none()
+            && !req.goal_blocked
+            && req.current_holds;
     }
     outcome
 }
@@ -374,6 +388,7 @@ fn record(
         align: None,
         passage: false,
         goal_blocked: false,
+        kept: false,
     };
     (chosen.map(|c| c.trajectory), record)
 }
