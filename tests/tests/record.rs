@@ -205,6 +205,24 @@ fn a_changed_controller_diverges_and_the_replay_says_where() {
     assert!(d.time_s > 0.0, "{d:?}");
 }
 
+/// The HIL tolerance is no blanket: replayed within it, the paper's recording agrees
+/// with itself, and a controller whose steering loop is half as fast is caught once
+/// the controller has settled. (A HIL recording replayed within it is tested in the
+/// VM, tests/tests/vcan_record.rs.)
+#[test]
+fn the_hil_tolerance_still_catches_a_changed_controller() {
+    let dir = tempfile::tempdir().unwrap();
+    recorded_paper_run(dir.path(), Some(12.0));
+    let mut rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
+    let report = replay(&rec, Tolerance::HIL).unwrap();
+    assert_eq!(report.divergence, None, "{report:#?}");
+    rec.config.follower.omega *= 0.5;
+    let report = replay(&rec, Tolerance::HIL).unwrap();
+    let d = report.divergence.expect("a changed controller diverges");
+    assert_eq!(d.message, "STEERING_CMD", "{d:?}");
+    assert!(d.time_s >= Tolerance::HIL.settle_s, "{d:?}");
+}
+
 #[test]
 fn replay_refuses_what_is_not_a_recording_naming_it() {
     let dir = tempfile::tempdir().unwrap();

@@ -134,8 +134,9 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
     );
     // The replay: the controller library fed the recording from the moment the
     // recorded controller started, to the end. Its agreement with the recorded
-    // commands is printed, not judged: open-loop, a HIL recording's steering does not
-    // yet replay within the stated tolerance (README, "Replay").
+    // commands is printed, not judged: open-loop, a HIL recording made in the emulated
+    // VM replays within the stated tolerance only some of the time (README, "Replay";
+    // the tolerance itself is tested in tests/tests/record.rs).
     let replay = Command::new(workspace_bin("ugv-sim")?)
         .arg("replay")
         .arg(results.join(MCAP_FILE))

@@ -345,14 +345,20 @@ fn laser_frame(
     Ok(f)
 }
 
-/// How close a replayed command must come to the recorded one.
+/// How close a replayed command must come to the recorded ones.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Tolerance {
-    /// How far apart in time a replayed and a recorded command may be, seconds.
+    /// How far apart in time a replayed and a recorded command may be, seconds: a
+    /// replayed command agrees when each signal lies within the range the recorded
+    /// commands of its message take over +- this (an envelope in time).
     pub window_s: f64,
-    /// How far each signal may differ, in units of its DBC scale factor (0: the
-    /// bytes must be equal, counter and CRC included).
+    /// How far each value signal may lie outside that range, in units of its DBC
+    /// scale factor (0: the bytes must be equal, counter and CRC included). States,
+    /// flags and gears must lie within it.
     pub steps: f64,
+    /// Signals are judged from this long after the controller's start, seconds
+    /// (before, its frames are only counted: missing or extra ones still diverge).
+    pub settle_s: f64,
 }
 
 impl Tolerance {
@@ -360,13 +366,22 @@ impl Tolerance {
     pub const EXACT: Tolerance = Tolerance {
         window_s: 0.0,
         steps: 0.0,
+        settle_s: 0.0,
     };
-    /// HIL: within two command periods, signals within 10 scale steps (0.1 degree
-    /// of steering, 0.1 m/s of speed); counter and CRC not compared (they follow the
-    /// number of frames sent, which the two runs need not share).
+    /// HIL: within five command periods (50 ms: the controller process sends on its
+    /// own clock, up to 25 ms late in the emulated VM, and the replay ticks on SIL's
+    /// grid), value signals within 10 scale steps (0.1 degree of steering, 0.1 m/s of
+    /// speed, 5 % of brake), states, flags and gears within the range, all from 1.5 s
+    /// after the controller's start; counter and CRC not compared (they follow the
+    /// number of frames sent, which the two runs need not share). The settling: the
+    /// recorded process read fixes before its first frame and got its first plans
+    /// back from its planning thread at instants the recording cannot show, and its
+    /// first paths, planned from that start, differ by up to a few degrees of steering
+    /// until the replannings after them agree.
     pub const HIL: Tolerance = Tolerance {
-        window_s: 2.0 * COMMAND_PERIOD,
+        window_s: 5.0 * COMMAND_PERIOD,
         steps: 10.0,
+        settle_s: 1.5,
     };
 
     pub fn for_mode(mode: RecordMode) -> Tolerance {
@@ -436,6 +451,9 @@ struct Comparer<'a> {
     messages: BTreeMap<String, MessageStats>,
     divergence: Option<Divergence>,
     epoch_ns: u64,
+    /// Value signals are judged from this instant (the controller's start plus the
+    /// tolerance's settling), ns on the log time.
+    judged_from_ns: u64,
 }
 
 impl Comparer<'_> {
@@ -503,18 +521,27 @@ impl Comparer<'_> {
         }
     }
 
+    /// A replayed command: it agrees when some recorded command of the same message
+    /// within the window agrees with it on every signal (an envelope in time: the two
+    /// controllers may change a state or a value a tick or two apart), and every
+    /// recorded command it agrees with is covered. It diverges when none does (the
+    /// difference reported against the recorded command nearest in time), or when no
+    /// recorded command of the message is within the window at all (an extra frame).
     fn replayed(&mut self, ns: u64, id: u32, data: &[u8]) {
         let name = self.name(id);
         self.messages.entry(name.clone()).or_default().replayed += 1;
         let window = (self.tol.window_s * 1e9).round() as u64;
-        // The earliest open recorded frame of the same message within the window.
-        let candidate = self.recorded[self.first_open..]
-            .iter()
-            .position(|(c, matched)| {
-                !matched && c.id == id && c.ns + window >= ns && c.ns <= ns + window
+        let candidates: Vec<usize> = (self.first_open..self.recorded.len())
+            .take_while(|&i| self.recorded[i].0.ns <= ns + window)
+            .filter(|&i| {
+                let c = &self.recorded[i].0;
+                c.id == id && c.ns + window >= ns
             })
-            .map(|i| i + self.first_open);
-        let Some(i) = candidate else {
+            .collect();
+        let Some(&nearest) = candidates
+            .iter()
+            .min_by_key(|&&i| self.recorded[i].0.ns.abs_diff(ns))
+        else {
             let d = Divergence {
                 time_s: self.time(ns),
                 message: name,
@@ -525,36 +552,75 @@ impl Comparer<'_> {
             self.diverge(d);
             return;
         };
-        self.recorded[i].1 = true;
-        let rec = self.recorded[i].0.clone();
-        let ours = self.signals(id, data);
-        let theirs = self.signals(id, &rec.data);
-        let mut first_bad = None;
-        for ((signal, a, allowed), (_, b, _)) in ours.iter().zip(&theirs) {
-            let diff = (a - b).abs();
-            let stats = self.messages.entry(name.clone()).or_default();
+        // While the controller settles, its signals are not judged (its frames are
+        // counted all the same).
+        let settling = ns < self.judged_from_ns;
+        let ours: Vec<(String, f64, f64)> = self
+            .signals(id, data)
+            .into_iter()
+            .map(|(n, v, allowed)| (n, v, if settling { f64::INFINITY } else { allowed }))
+            .collect();
+        // Per signal, the recorded values' range over the window, and how far outside
+        // it the replayed value lies.
+        let mut range: Vec<(f64, f64)> = vec![(f64::INFINITY, f64::NEG_INFINITY); ours.len()];
+        let mut same_bytes = false;
+        for &i in &candidates {
+            let rec = &self.recorded[i].0;
+            same_bytes |= data == rec.data.as_slice();
+            for (k, (_, b, _)) in self
+                .signals(id, &rec.data)
+                .iter()
+                .enumerate()
+                .take(ours.len())
+            {
+                range[k] = (range[k].0.min(*b), range[k].1.max(*b));
+            }
+        }
+        let least: Vec<f64> = ours
+            .iter()
+            .zip(&range)
+            .map(|((_, a, _), (lo, hi))| (lo - a).max(a - hi).max(0.0))
+            .collect();
+        let agreed = (self.tol.steps > 0.0 || same_bytes || settling)
+            && ours
+                .iter()
+                .zip(&least)
+                .all(|((_, _, allowed), diff)| *diff <= allowed + 1e-9);
+        if agreed {
+            for &i in &candidates {
+                self.recorded[i].1 = true;
+            }
+        }
+        let stats = self.messages.entry(name.clone()).or_default();
+        for ((signal, _, allowed), diff) in ours.iter().zip(&least) {
+            if allowed.is_infinite() {
+                continue;
+            }
             let max = stats.max_diff.entry(signal.clone()).or_insert(0.0);
-            *max = max.max(diff);
-            if first_bad.is_none() && diff > allowed + 1e-9 {
-                first_bad = Some((signal.clone(), *b, *a));
-            }
+            *max = max.max(*diff);
         }
-        if self.tol.steps == 0.0 && first_bad.is_none() && data != rec.data.as_slice() {
-            first_bad = Some(("(bytes)".to_owned(), 0.0, 0.0));
+        if agreed {
+            stats.matched += 1;
+            return;
         }
-        match first_bad {
-            Some((signal, recorded, replayed)) => {
-                let d = Divergence {
-                    time_s: self.time(ns),
-                    message: name,
-                    recorded: Some(format!("{recorded} ({})", hex(&rec.data))),
-                    replayed: Some(format!("{replayed} ({})", hex(data))),
-                    signal: Some(signal),
-                };
-                self.diverge(d);
-            }
-            None => self.messages.entry(name).or_default().matched += 1,
-        }
+        let rec = self.recorded[nearest].0.clone();
+        let theirs = self.signals(id, &rec.data);
+        let (signal, recorded, replayed) = ours
+            .iter()
+            .zip(&theirs)
+            .find(|((_, a, allowed), (_, b, _))| (a - b).abs() > allowed + 1e-9)
+            .map_or(
+                ("(bytes)".to_owned(), 0.0, 0.0),
+                |((n, a, _), (_, b, _))| (n.clone(), *b, *a),
+            );
+        let d = Divergence {
+            time_s: self.time(ns),
+            message: name,
+            recorded: Some(format!("{recorded} ({})", hex(&rec.data))),
+            replayed: Some(format!("{replayed} ({})", hex(data))),
+            signal: Some(signal),
+        };
+        self.diverge(d);
     }
 }
 
@@ -624,17 +690,26 @@ fn controller_start(rec: &Recorded) -> u64 {
     }
 }
 
+/// How long before its first frame the recorded controller's CAN socket is taken to
+/// have been open: its start-up (socket opened, first inputs read, first tick) within
+/// one command period of sending.
+const SOCKET_OPEN_BEFORE_NS: u64 = 10_000_000;
+
 /// What a controller starting at `start_ns` finds waiting on its ports, and the index
 /// of the first input after that. The GPS line keeps the newest whole sentences that
 /// fit its buffer, the laser service keeps its newest frame (the subscriber's
-/// history), and a CAN socket hears only frames sent after it was opened.
+/// history), and a CAN socket holds the frames sent since it was opened
+/// ([`SOCKET_OPEN_BEFORE_NS`] before the first frame the controller sent: the
+/// reports its first tick read, and why that tick already enabled the ECUs).
 fn waiting_at_start<'a>(arrived: &[(u64, &'a Input)], start_ns: u64) -> (Vec<&'a Input>, usize) {
     let first_after = arrived.partition_point(|(ns, _)| *ns < start_ns);
     let before = &arrived[..first_after];
     let mut waiting = Vec::new();
     let mut line_bytes = 0;
-    for &(_, input) in before.iter().rev() {
+    let opened = start_ns.saturating_sub(SOCKET_OPEN_BEFORE_NS);
+    for &(ns, input) in before.iter().rev() {
         match input {
+            Input::Can { .. } if ns >= opened => waiting.push(input),
             Input::Gps(bytes) if line_bytes + bytes.len() <= LINE_BUFFER => {
                 line_bytes += bytes.len();
                 waiting.push(input);
@@ -649,6 +724,23 @@ fn waiting_at_start<'a>(arrived: &[(u64, &'a Input)], start_ns: u64) -> (Vec<&'a
     }
     waiting.reverse();
     (waiting, first_after)
+}
+
+/// An input onto the replayed controller's ports; a CAN frame from the ECUs' side of
+/// the bus (a standard ID, checked when read, and at most 8 bytes; the memory bus never
+/// fails).
+fn feed(rt: &mut Runtime<MemGps, MemLaser, MemEndpoint>, ecus: &mut MemEndpoint, input: &Input) {
+    match input {
+        Input::Gps(bytes) => rt.gps_mut().push(bytes),
+        Input::Laser(frame) => rt.laser_mut().push(frame.clone()),
+        Input::Can { id, data } => {
+            if let Some(f) =
+                embedded_can::StandardId::new(*id).and_then(|sid| MemFrame::new(sid, data))
+            {
+                let _ = embedded_can::nb::Can::transmit(ecus, &f);
+            }
+        }
+    }
 }
 
 /// Replay `rec` into the controller library and compare its commands with the
@@ -673,6 +765,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
     // The ECUs' side of the bus: recorded reports go out, the controller's come in.
     let mut ecus: MemEndpoint = bus.endpoint();
     let mut heard: Vec<TapFrame> = Vec::new();
+    let start_ns = controller_start(rec);
     let mut cmp = Comparer {
         spec: &spec,
         tol,
@@ -681,6 +774,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         messages: BTreeMap::new(),
         divergence: None,
         epoch_ns: rec.info.epoch_unix_ns,
+        judged_from_ns: start_ns + (tol.settle_s * 1e9).round() as u64,
     };
     for c in &rec.commands {
         let name = cmp.name(c.id);
@@ -692,15 +786,10 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         .map(|(ns, _)| *ns)
         .max(rec.commands.last().map(|c| c.ns))
         .unwrap_or(rec.info.epoch_unix_ns);
-    let start_ns = controller_start(rec);
     let arrived = arrivals(rec);
     let (backlog, mut next_input) = waiting_at_start(&arrived, start_ns);
     for input in backlog {
-        match input {
-            Input::Gps(bytes) => rt.gps_mut().push(bytes),
-            Input::Laser(frame) => rt.laser_mut().push(frame.clone()),
-            Input::Can { .. } => {}
-        }
+        feed(&mut rt, &mut ecus, input);
     }
     let mut exit = None;
     let mut replayed_s = 0.0;
@@ -709,19 +798,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
             if *ns > tick_ns {
                 break;
             }
-            match input {
-                Input::Gps(bytes) => rt.gps_mut().push(bytes),
-                Input::Laser(frame) => rt.laser_mut().push(frame.clone()),
-                Input::Can { id, data } => {
-                    // A standard ID (checked when read) and at most 8 bytes; the
-                    // memory bus never fails.
-                    if let Some(f) =
-                        embedded_can::StandardId::new(*id).and_then(|sid| MemFrame::new(sid, data))
-                    {
-                        let _ = embedded_can::nb::Can::transmit(&mut ecus, &f);
-                    }
-                }
-            }
+            feed(&mut rt, &mut ecus, input);
             next_input += 1;
         }
         if let Some(e) = rt.step(now) {
@@ -801,41 +878,43 @@ mod tests {
     }
 
     #[test]
-    fn a_late_controller_finds_the_newest_sentences_that_fit_the_line_and_the_newest_scan() {
+    fn a_late_controller_finds_the_newest_sentences_that_fit_the_line_the_newest_scan_and_the_last_frames()
+     {
+        let ms = 1_000_000;
         let sentence = |n: u8| Input::Gps(vec![n; 1500]);
+        let frame = |n: u8| Input::Can {
+            id: 0x200,
+            data: vec![n],
+        };
         let inputs = vec![
-            (1_100, sentence(1)),
-            (1_200, Input::Laser(Box::default())),
-            (1_300, sentence(2)),
-            (
-                1_400,
-                Input::Can {
-                    id: 0x200,
-                    data: vec![1],
-                },
-            ),
-            (1_500, sentence(3)),
-            (1_600, Input::Laser(Box::default())),
-            (1_700, sentence(4)),
-            (2_000, sentence(5)),
+            (110 * ms, sentence(1)),
+            (120 * ms, Input::Laser(Box::default())),
+            (130 * ms, sentence(2)),
+            (140 * ms, frame(1)),
+            (150 * ms, sentence(3)),
+            (160 * ms, Input::Laser(Box::default())),
+            (170 * ms, sentence(4)),
+            (195 * ms, frame(2)),
+            (200 * ms, sentence(5)),
         ];
         let rec = recording(RecordMode::Hil, inputs, Vec::new());
         // As they arrived (here: at their log times).
         let arrived: Vec<(u64, &Input)> = rec.inputs.iter().map(|(ns, i)| (*ns, i)).collect();
-        let (waiting, next) = waiting_at_start(&arrived, 2_000);
+        let (waiting, next) = waiting_at_start(&arrived, 200 * ms);
         // Sentence 5 is at the start itself: delivered at the first tick, not waiting.
-        assert_eq!(next, 7);
+        assert_eq!(next, 8);
         let kinds: Vec<String> = waiting
             .iter()
             .map(|i| match i {
                 Input::Gps(b) => format!("gps{}", b[0]),
                 Input::Laser(_) => "laser".to_owned(),
-                Input::Can { .. } => "can".to_owned(),
+                Input::Can { data, .. } => format!("can{}", data[0]),
             })
             .collect();
         // 4096 bytes hold two 1500-byte sentences (the third would overflow): 3 and 4,
-        // oldest first, with the newest scan between them; no CAN frame.
-        assert_eq!(kinds, ["gps3", "laser", "gps4"]);
+        // oldest first, with the newest scan between them; the frame sent within the
+        // socket's 10 ms before the start, not the one before it was opened.
+        assert_eq!(kinds, ["gps3", "laser", "gps4", "can2"]);
     }
 
     #[test]
@@ -883,6 +962,7 @@ mod tests {
             messages: BTreeMap::new(),
             divergence: None,
             epoch_ns: 0,
+            judged_from_ns: 0,
         };
         let frame = [1u8, 0, 0, 0, 0, 0, 0, 0];
         let allowed: BTreeMap<String, f64> = cmp
