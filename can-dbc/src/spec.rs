@@ -185,6 +185,22 @@ impl NetworkSpec {
         self.messages.iter().find(|m| m.id == id)
     }
 
+    /// The IDs of the messages `node` sends or receives (a receiver of any of their
+    /// signals): what its acceptance filter lets through, its own IDs included so
+    /// that a second sender on them is still heard.
+    pub fn ids_of_node(&self, node: &str) -> Vec<u16> {
+        self.messages
+            .iter()
+            .filter(|m| {
+                m.senders.iter().any(|s| s == node)
+                    || m.signals
+                        .iter()
+                        .any(|s| s.receivers.iter().any(|r| r == node))
+            })
+            .map(|m| m.id)
+            .collect()
+    }
+
     /// A message by name (case-insensitive) or by ID written as `0x100` or `256`.
     pub fn find_message(&self, key: &str) -> Option<&MessageSpec> {
         let by_id = key

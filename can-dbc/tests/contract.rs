@@ -548,3 +548,19 @@ fn fault_reports_from_several_senders_keep_separate_counters() {
     assert!(rx.accept_parts(0xF0, false, false, &again).is_err());
     assert_eq!(rx.stats().accepted, 40);
 }
+
+#[test]
+fn a_nodes_ids_are_what_it_sends_and_receives() {
+    let ids = |node: &str| {
+        let mut v = NETWORK.ids_of_node(node);
+        v.sort_unstable();
+        v
+    };
+    // The controller sends the heartbeat, both commands and fault reports, and reads
+    // both reports.
+    assert_eq!(ids("CONTROLLER"), [128, 240, 256, 257, 272, 273]);
+    // The steering ECU: the heartbeat and its command in, its report and fault reports
+    // out; nothing of the throttle's.
+    assert_eq!(ids("STEERING_ECU"), [128, 240, 256, 257]);
+    assert!(ids("NOBODY").is_empty());
+}

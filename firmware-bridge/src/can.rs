@@ -250,6 +250,24 @@ impl CanPort<CanSocket> {
         Ok(CanPort::new(socket, iface))
     }
 
+    /// Let the kernel hand this socket only data and remote frames with these
+    /// standard IDs (error frames still come): a node's acceptance filter, so that
+    /// traffic meant for others (a babbling node flooding another ID) costs it
+    /// nothing. Frames with those IDs are still checked and counted as before.
+    pub fn accept_only(&self, ids: &[u16]) -> Result<(), BridgeError> {
+        let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG;
+        let filters: Vec<socketcan::CanFilter> = ids
+            .iter()
+            .map(|&id| socketcan::CanFilter::new(u32::from(id), mask))
+            .collect();
+        socketcan::SocketOptions::set_filters(&self.bus, &filters).map_err(|source| {
+            BridgeError::Io {
+                iface: self.name.clone(),
+                source,
+            }
+        })
+    }
+
     /// Wait up to `timeout` for a frame (woken by the socket, not polling); `None`
     /// when none came.
     pub fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, BridgeError> {

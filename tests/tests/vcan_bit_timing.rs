@@ -116,13 +116,10 @@ fn paced_sockets_put_frames_on_vcan_at_the_bit_rate_lowest_id_first() -> Result<
 
 /// The bus-overload fault scenario in HIL with the real controller binary: the
 /// babbling node's flood of ID 0, paced at the bit rate, starves the ECUs' reports;
-/// the verdict reports the late frames, and the car ends safe. The flood starts once
-/// the car has driven 3 m (not at 4 s as in the suite: a controller that starts
-/// slowly in an emulated guest may still be enabling its ECUs then). Both ECUs must be
-/// safe within 1.5 s, not the suite's 0.5 s (which the fault suite holds in SIL): in
-/// the emulated guest, flooded at 5,000 frames/s, the processes stall for up to a
-/// second (fix-to-command up to 1.2 s measured there), and the ECUs' watchdogs
-/// judge on their own late ticks.
+/// the verdict reports the late frames, and the car ends safe within the scenario's
+/// 0.5 s, as in SIL. The flood starts once the car has driven 3 m (not at 4 s as in
+/// the suite: a controller that starts slowly in an emulated guest may still be
+/// enabling its ECUs then).
 #[test]
 fn an_overloaded_schedule_in_hil_shows_up_as_late_frames_and_the_car_ends_safe() -> Result<()> {
     let vcan = TestVcan::new("bitt")?;
@@ -141,12 +138,7 @@ fn an_overloaded_schedule_in_hil_shows_up_as_late_frames_and_the_car_ends_safe()
         suite.contains("safe_within_s = 0.5"),
         "scenario 43 changed:\n{suite}"
     );
-    std::fs::write(
-        &scenario,
-        suite
-            .replace("at_s = 4.0", "after_m = 3.0")
-            .replace("safe_within_s = 0.5", "safe_within_s = 1.5"),
-    )?;
+    std::fs::write(&scenario, suite.replace("at_s = 4.0", "after_m = 3.0"))?;
     let out = Command::new(workspace_bin("ugv-sim")?)
         .arg("run")
         .arg(&scenario)

@@ -220,6 +220,42 @@ fn e2e_rejects_corrupted_replayed_and_skipped_frames_from_cansend() -> Result<()
     Ok(())
 }
 
+/// The controller's acceptance filter: frames on IDs it neither sends nor receives
+/// (a babbler's) never reach it, its own and its ECUs' still do (a bad one still
+/// counted), and so do frames on its own IDs from someone else (the second sender).
+#[test]
+fn an_acceptance_filter_keeps_other_ids_away_and_lets_the_nodes_own_through() -> Result<()> {
+    let vcan = TestVcan::new("filt")?;
+    let mut port = CanPort::open(&vcan.name)?;
+    port.accept_only(&golf_car_can::NETWORK.ids_of_node("CONTROLLER"))?;
+    let cmd = SteeringCmd {
+        enable: true,
+        target_angle: 10.0,
+        max_rate: 50.0,
+    };
+    let mut data = cmd.encode()?;
+    protect(SteeringCmd::ID, &mut data, 0);
+    for _ in 0..50 {
+        let out = can_utils("cansend", &[&vcan.name, "000#0102030405060708"])?;
+        ensure!(out.status.success());
+        let out = can_utils("cansend", &[&vcan.name, "555#0102030405060708"])?;
+        ensure!(out.status.success());
+    }
+    cansend(&vcan.name, SteeringCmd::ID, &data)?;
+    // The first frame through is the steering command, after 100 of others.
+    expect_message(&mut port)?;
+    let out = can_utils("cansend", &[&vcan.name, "100#0102"])?;
+    ensure!(out.status.success());
+    ensure!(matches!(
+        expect_rejected(&mut port)?,
+        E2eError::WrongDlc { dlc: 2, .. }
+    ));
+    ensure!(port.recv(Duration::from_millis(200))?.is_none());
+    let s = port.stats();
+    ensure!(s.unknown_id == 0 && s.accepted == 1, "{s:?}");
+    Ok(())
+}
+
 /// The timed socket of the simulator's HIL loop: a frame is handed out once the
 /// horizon has passed its kernel receive time, in order, never before.
 #[test]
