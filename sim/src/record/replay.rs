@@ -605,13 +605,15 @@ impl Comparer<'_> {
         }
         let rec = self.recorded[nearest].0.clone();
         let theirs = self.signals(id, &rec.data);
+        // The first signal outside the envelope, with the nearest recorded value.
         let (signal, recorded, replayed) = ours
             .iter()
             .zip(&theirs)
-            .find(|((_, a, allowed), (_, b, _))| (a - b).abs() > allowed + 1e-9)
+            .zip(&least)
+            .find(|(((_, _, allowed), _), diff)| **diff > allowed + 1e-9)
             .map_or(
                 ("(bytes)".to_owned(), 0.0, 0.0),
-                |((n, a, _), (_, b, _))| (n.clone(), *b, *a),
+                |(((n, a, _), (_, b, _)), _)| (n.clone(), *b, *a),
             );
         let d = Divergence {
             time_s: self.time(ns),
