@@ -79,6 +79,17 @@ pub(super) fn clip_to_start(radius: f64, x: f64, y: f64, px: f64, py: f64, r0: f
     radius.min(gap.max(0.0))
 }
 
+/// Whether the rear axle at (px, py) is farther than `r0` from every obstacle, each
+/// with its radius clipped to just clear of `from` (where the car starts, as planned:
+/// [`clip_to_start`]), so an obstacle the car already stands within the margin of may
+/// come no closer.
+pub(super) fn clear_at(px: f64, py: f64, obstacles: &[Circle], from: (f64, f64), r0: f64) -> bool {
+    obstacles.iter().all(|o| {
+        let radius = clip_to_start(o.radius, o.x, o.y, from.0, from.1, r0);
+        (px - o.x).hypot(py - o.y) > radius + r0
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -104,7 +104,7 @@ use crate::config::ControllerConfig;
 use crate::localisation::Pose;
 use crate::planner::{self, PlanProblem, Trajectory};
 use crate::route::{Route, RoutePoint};
-use frame::{clip_to_start, wrap};
+use frame::{clear_at, clip_to_start, wrap};
 use search::{Clearance, MAX_GOAL_HEADING, MAX_LOCAL_HEADING};
 
 /// What guidance asks of the actuators.
@@ -490,10 +490,7 @@ impl Navigator {
         (0..=n).all(|j| {
             let qx = x + left * j as f64 / n as f64;
             let (wx, wy) = self.frame.to_world(qx, path.y(qx));
-            obstacles.iter().all(|o| {
-                let radius = clip_to_start(o.radius, o.x, o.y, pose.x, pose.y, r0);
-                (wx - o.x).hypot(wy - o.y) > radius + r0
-            })
+            clear_at(wx, wy, obstacles, (pose.x, pose.y), r0)
         })
     }
 

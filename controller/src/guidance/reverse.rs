@@ -2,7 +2,7 @@
 //! short way along an arc checked against the obstacles it knows of ([`Reverse`]),
 //! then replans.
 
-use super::frame::{Circle, clip_to_start, wrap};
+use super::frame::{Circle, clear_at, wrap};
 
 /// Points checked per metre of a reverse path.
 const CHECKS_PER_M: f64 = 5.0;
@@ -95,10 +95,7 @@ impl Reverse {
         let n = (self.distance * CHECKS_PER_M).ceil().max(1.0) as usize;
         (1..=n).all(|j| {
             let (px, py, _) = self.pose_at(self.distance * j as f64 / n as f64);
-            obstacles.iter().all(|o| {
-                let radius = clip_to_start(o.radius, o.x, o.y, self.x, self.y, r0);
-                (px - o.x).hypot(py - o.y) > radius + r0
-            })
+            clear_at(px, py, obstacles, (self.x, self.y), r0)
         })
     }
 
