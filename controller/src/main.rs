@@ -240,9 +240,7 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         ),
     };
     let can = CanPort::open(&args.can)?;
-    // Only the controller's messages reach it: a bus flooded on other IDs does not
-    // load its loop.
-    can.accept_only(&golf_car_can::NETWORK.ids_of_node("CONTROLLER"))?;
+    ugv_controller::runtime::accept_controller_ids(&can)?;
     let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
     let gps = NmeaLink::new(port, ReaderConfig::default());
     let laser = LaserSubscriber::new(&args.laser)?;

@@ -245,6 +245,19 @@ pub struct Runtime<G, L, B> {
     pub skipped_ticks: u64,
 }
 
+/// The controller's node in golf_car.dbc.
+pub const NODE: &str = "CONTROLLER";
+
+/// Set the controller's acceptance filter on `can`: only what the DBC has it send or
+/// receive reaches it, so a bus flooded on other IDs does not load its loop. The
+/// binary's socket, SIL's memory bus and the replay all take the same.
+pub fn accept_controller_ids<B>(can: &CanPort<B>) -> Result<(), BridgeError>
+where
+    B: embedded_can::nb::Can + firmware_bridge::can::Filtered,
+{
+    can.accept_only(&golf_car_can::NETWORK.ids_of_node(NODE))
+}
+
 impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
     pub fn new(ctl: Controller, gps: G, laser: L, can: CanPort<B>) -> Self {
         Runtime {

@@ -224,6 +224,40 @@ fn open_error(iface: &str, source: io::Error) -> BridgeError {
     }
 }
 
+/// A bus endpoint with an acceptance filter: a SocketCAN socket (the kernel's
+/// filter), a timed one (see [`timed`]), or a memory bus endpoint (see [`membus`]).
+pub trait Filtered {
+    /// Hand this endpoint only data and remote frames with these standard IDs (error
+    /// frames still come).
+    fn set_acceptance(&self, ids: &[u16]) -> io::Result<()>;
+}
+
+impl Filtered for CanSocket {
+    fn set_acceptance(&self, ids: &[u16]) -> io::Result<()> {
+        let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG;
+        let filters: Vec<socketcan::CanFilter> = ids
+            .iter()
+            .map(|&id| socketcan::CanFilter::new(u32::from(id), mask))
+            .collect();
+        socketcan::SocketOptions::set_filters(self, &filters)
+    }
+}
+
+impl<B: embedded_can::nb::Can + Filtered> CanPort<B> {
+    /// Let this port receive only frames with these standard IDs (and error frames):
+    /// a node's acceptance filter, so that traffic meant for others (a babbling node
+    /// flooding another ID) costs it nothing. Frames with those IDs are still checked
+    /// and counted as before.
+    pub fn accept_only(&self, ids: &[u16]) -> Result<(), BridgeError> {
+        self.bus
+            .set_acceptance(ids)
+            .map_err(|source| BridgeError::Io {
+                iface: self.name.clone(),
+                source,
+            })
+    }
+}
+
 impl CanPort<timed::TimedSocket> {
     /// Open a raw CAN socket on `iface` whose frames are handed out by `horizon`
     /// (see [`timed`]), sending through `pacer` when given (see [`paced`]).
@@ -248,24 +282,6 @@ impl CanPort<CanSocket> {
         let socket = CanSocket::open(iface).map_err(io)?;
         socket.set_nonblocking(true).map_err(io)?;
         Ok(CanPort::new(socket, iface))
-    }
-
-    /// Let the kernel hand this socket only data and remote frames with these
-    /// standard IDs (error frames still come): a node's acceptance filter, so that
-    /// traffic meant for others (a babbling node flooding another ID) costs it
-    /// nothing. Frames with those IDs are still checked and counted as before.
-    pub fn accept_only(&self, ids: &[u16]) -> Result<(), BridgeError> {
-        let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG;
-        let filters: Vec<socketcan::CanFilter> = ids
-            .iter()
-            .map(|&id| socketcan::CanFilter::new(u32::from(id), mask))
-            .collect();
-        socketcan::SocketOptions::set_filters(&self.bus, &filters).map_err(|source| {
-            BridgeError::Io {
-                iface: self.name.clone(),
-                source,
-            }
-        })
     }
 
     /// Wait up to `timeout` for a frame (woken by the socket, not polling); `None`

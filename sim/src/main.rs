@@ -352,6 +352,8 @@ fn run_ecu(
     );
     let sc = Scenario::load_or_paper(scenario)?;
     let port = CanPort::open(can).with_context(|| format!("{kind:?} ECU on {can}"))?;
+    port.accept_only(&kind.accepts())
+        .with_context(|| format!("{kind:?} ECU's acceptance filter on {can}"))?;
     let stop = stop_on_signal()?;
     eprintln!(
         "ugv-sim: simulated {kind:?} ECU on {can} (parameters of scenario {:?}), {} Hz; Ctrl-C ends it",

@@ -8,9 +8,10 @@ use firmware_bridge::nmea::ReaderConfig;
 use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError};
-use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime};
+use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime, accept_controller_ids};
 use ugv_controller::trace::Trace;
 
+use crate::ecu::EcuKind;
 use crate::faults::ProcessFault;
 use crate::record::{
     Outputs, RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo,
@@ -105,10 +106,15 @@ pub fn run_sil_outputs(
         true => MemBus::timed(golf_car_can::NETWORK.baudrate),
         false => MemBus::new(),
     };
+    // As in HIL (crate::hil::Endpoints::open): the steering ECU's endpoint sees the
+    // whole bus for the bus load; the throttle ECU and the controller take only their
+    // nodes' IDs.
+    let throttle = CanPort::new(bus.endpoint(), "sil");
+    throttle.accept_only(&EcuKind::Throttle.accepts())?;
     let mut sim = Sim::new(
         scenario.clone(),
         CanPort::new(bus.endpoint(), "sil"),
-        CanPort::new(bus.endpoint(), "sil"),
+        throttle,
     )
     .with_sensors()?;
     let gps = MemGps::new(ReaderConfig {
@@ -116,12 +122,9 @@ pub fn run_sil_outputs(
         ..ReaderConfig::default()
     });
     // The controller on memory ports, run by the same loop as the binary's.
-    let mut rt = Runtime::new(
-        Controller::new(cfg)?,
-        gps,
-        MemLaser::default(),
-        CanPort::new(bus.endpoint(), "sil"),
-    );
+    let can = CanPort::new(bus.endpoint(), "sil");
+    accept_controller_ids(&can)?;
+    let mut rt = Runtime::new(Controller::new(cfg)?, gps, MemLaser::default(), can);
     let mut rec = match outputs.any() {
         true => {
             let toml = toml::to_string_pretty(cfg).unwrap_or_default();

@@ -94,17 +94,35 @@ struct Wire {
     arbiter: Arbiter<MemFrame>,
 }
 
+/// A node's connection: the frames waiting for it, and its acceptance filter.
+#[derive(Debug, Default)]
+struct Inbox {
+    frames: VecDeque<MemFrame>,
+    /// The standard IDs it accepts; every frame when `None`.
+    accepts: Option<Vec<u16>>,
+}
+
+impl Inbox {
+    fn accepts(&self, frame: &MemFrame) -> bool {
+        match (&self.accepts, frame.id) {
+            (None, _) => true,
+            (Some(ids), Id::Standard(id)) => ids.contains(&id.as_raw()),
+            (Some(_), Id::Extended(_)) => false,
+        }
+    }
+}
+
 #[derive(Debug, Default)]
 struct Hub {
-    inboxes: Vec<VecDeque<MemFrame>>,
+    inboxes: Vec<Inbox>,
     wire: Option<Wire>,
 }
 
-/// `frame` from node `from` into every other node's inbox.
-fn deliver(inboxes: &mut [VecDeque<MemFrame>], from: usize, frame: &MemFrame) {
+/// `frame` from node `from` into every other node's inbox that accepts it.
+fn deliver(inboxes: &mut [Inbox], from: usize, frame: &MemFrame) {
     for (i, inbox) in inboxes.iter_mut().enumerate() {
-        if i != from {
-            inbox.push_back(frame.clone());
+        if i != from && inbox.accepts(frame) {
+            inbox.frames.push_back(frame.clone());
         }
     }
 }
@@ -159,7 +177,7 @@ impl MemBus {
     /// A new node on the bus.
     pub fn endpoint(&self) -> MemEndpoint {
         let mut hub = lock(&self.hub);
-        hub.inboxes.push(VecDeque::new());
+        hub.inboxes.push(Inbox::default());
         MemEndpoint {
             hub: Arc::clone(&self.hub),
             index: hub.inboxes.len() - 1,
@@ -191,8 +209,17 @@ impl embedded_can::nb::Can for MemEndpoint {
         let mut hub = lock(&self.hub);
         hub.inboxes
             .get_mut(self.index)
-            .and_then(VecDeque::pop_front)
+            .and_then(|inbox| inbox.frames.pop_front())
             .ok_or(nb::Error::WouldBlock)
+    }
+}
+
+impl super::Filtered for MemEndpoint {
+    fn set_acceptance(&self, ids: &[u16]) -> std::io::Result<()> {
+        if let Some(inbox) = lock(&self.hub).inboxes.get_mut(self.index) {
+            inbox.accepts = Some(ids.to_vec());
+        }
+        Ok(())
     }
 }
 
@@ -229,6 +256,30 @@ mod tests {
             assert!(port.try_recv().is_none());
             assert_eq!(port.stats().accepted, 20);
         }
+    }
+
+    #[test]
+    fn an_acceptance_filter_keeps_other_ids_from_an_endpoint_only() {
+        let bus = MemBus::new();
+        let mut a = CanPort::new(bus.endpoint(), "mem");
+        let mut filtered = CanPort::new(bus.endpoint(), "mem");
+        let mut open = CanPort::new(bus.endpoint(), "mem");
+        filtered.accept_only(&[SteeringCmd::ID]).expect("filter");
+        a.send_payload(0x000, &[0xff; 8]).expect("send");
+        a.send(&SteeringCmd::default()).expect("send");
+        a.send_payload(0x555, &[0xff; 8]).expect("send");
+        assert!(matches!(
+            filtered.try_recv(),
+            Some(Received::Message(GolfCarMessage::SteeringCmd(_)))
+        ));
+        assert!(filtered.try_recv().is_none());
+        assert_eq!(filtered.stats().unknown_id, 0);
+        let mut heard = 0;
+        while open.try_recv().is_some() {
+            heard += 1;
+        }
+        assert_eq!(heard, 3, "an endpoint without a filter hears every frame");
+        assert_eq!(open.stats().unknown_id, 2);
     }
 
     #[test]

@@ -17,6 +17,7 @@ use std::time::SystemTime;
 
 use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
 
+use super::Filtered;
 use super::paced::Pacer;
 use crate::clock::unix_ns;
 
@@ -116,6 +117,12 @@ impl TimedSocket {
             CanFrame::Error(e) => Err(nb::Error::Other(socketcan::Error::from(e.into_error()))),
             other => Ok(other),
         }
+    }
+}
+
+impl Filtered for TimedSocket {
+    fn set_acceptance(&self, ids: &[u16]) -> io::Result<()> {
+        self.socket.set_acceptance(ids)
     }
 }
 

@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, parse_toml, read_file};
 
+use crate::ecu::EcuKind;
 use crate::scenario::fields::ScenarioError;
 
 /// An actuator ECU: played by the simulator on its bus, or a physical ECU on a
@@ -212,8 +213,8 @@ impl DeviceMap {
         let mut buses: Vec<(String, Vec<&'static str>)> = Vec::new();
         for (device, can) in self.physical_can() {
             let node = match device {
-                "steering" => "STEERING_ECU",
-                "throttle" => "THROTTLE_ECU",
+                "steering" => EcuKind::Steering.node(),
+                "throttle" => EcuKind::Throttle.node(),
                 _ => "CONTROLLER",
             };
             match buses.iter_mut().find(|(bus, _)| bus == can) {

@@ -59,6 +59,22 @@ pub enum EcuKind {
     Throttle,
 }
 
+impl EcuKind {
+    /// Its node in golf_car.dbc.
+    pub fn node(self) -> &'static str {
+        match self {
+            EcuKind::Steering => "STEERING_ECU",
+            EcuKind::Throttle => "THROTTLE_ECU",
+        }
+    }
+
+    /// The IDs its acceptance filter lets through: what the DBC has it send or
+    /// receive.
+    pub fn accepts(self) -> Vec<u16> {
+        golf_car_can::NETWORK.ids_of_node(self.node())
+    }
+}
+
 /// A simulated ECU on the bus.
 #[derive(Clone, Debug)]
 pub enum Ecu {

@@ -29,6 +29,7 @@ pub use wires::{WireMap, Wires};
 
 use crate::devices::gps::GpsError;
 use crate::devices::map::{ControllerSite, GpsOutput};
+use crate::ecu::EcuKind;
 use crate::faults::ProcessFault;
 use crate::isolate::IsolateError;
 use crate::measure::fix_latency;
@@ -163,6 +164,16 @@ impl Endpoints {
             })
         };
         let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
+        // The steering ECU's socket is the simulator's view of the whole bus: it
+        // counts every frame for the bus load and reports the other nodes' frames to
+        // the pacer, so it takes all. The throttle ECU's takes only its node's IDs, as
+        // a real ECU's acceptance filter does.
+        throttle
+            .accept_only(&EcuKind::Throttle.accepts())
+            .map_err(|source| HilError::Can {
+                iface: format!("{iface} (throttle ECU)"),
+                source,
+            })?;
         // The tap feeds the recording and the live view alike.
         let tap = match options.record || options.live.is_some() {
             true => Some(SocketTap::open(&iface).map_err(|source| RecordError::Tap {

@@ -74,6 +74,8 @@ pub enum ReplayError {
     Controller(#[from] ugv_controller::core::ControllerError),
     #[error("golf_car.dbc: {0}")]
     Dbc(#[from] golf_car_can::spec::SpecError),
+    #[error("the controller's CAN port: {0}")]
+    Bus(#[from] firmware_bridge::BridgeError),
 }
 
 /// One input the controller received.
@@ -755,6 +757,8 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         RecordMode::Sil => Controller::new(&rec.config)?,
         RecordMode::Hil => Controller::new(&rec.config)?.with_plans_taken_next_tick(),
     };
+    let can = CanPort::new(bus.endpoint(), "replay");
+    ugv_controller::runtime::accept_controller_ids(&can)?;
     let mut rt = Runtime::new(
         controller,
         MemGps::new(ReaderConfig {
@@ -762,7 +766,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
             ..ReaderConfig::default()
         }),
         MemLaser::default(),
-        CanPort::new(bus.endpoint(), "replay"),
+        can,
     );
     // The ECUs' side of the bus: recorded reports go out, the controller's come in.
     let mut ecus: MemEndpoint = bus.endpoint();
