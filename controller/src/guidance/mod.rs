@@ -96,7 +96,7 @@ pub use error::{GuidanceError, ReplanError};
 pub use follower::{FollowInputs, SteeringLaw};
 pub use footprint::Footprint;
 pub use frame::{Circle, PathFrame};
-pub use pacing::{Pacing, sweep};
+pub use pacing::{Pacing, Pass, sweep};
 pub use reverse::Reverse;
 pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
 
@@ -396,25 +396,55 @@ impl Navigator {
         let goal_blocked = !search::clear_of(&end, obstacles, narrow.r0);
         let theta = wrap(pose.theta - frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
+        let (leader, oncoming) = pacing::traffic(
+            &problem.obstacles,
+            problem.state.x,
+            problem.state.y,
+            wide.r0,
+        );
+        // Traffic keeping to its line is passed on the side not kept to, on a lane
+        // clear of it, while the route has at least a horizon left to pass it in.
+        let passing = any_moving
+            && leader.is_some_and(|l| l.along_line)
+            && self.route.length() - s >= pc.horizon_m;
+        let pass_goals = match passing {
+            true => {
+                let side = if pc.keep_right { 1.0 } else { -1.0 };
+                let lane = pacing::pass_lane(
+                    &problem.obstacles,
+                    problem.state.x,
+                    problem.state.y,
+                    wide.r0,
+                    side,
+                );
+                problems(
+                    &search::pass_goals(&self.route, &wide, s, &goal, lane, obstacles),
+                    wide.r0,
+                )
+            }
+            false => Vec::new(),
+        };
         let pacing = any_moving.then(|| {
-            let (follow, oncoming) = pacing::traffic(
-                &problem.obstacles,
-                problem.state.x,
-                problem.state.y,
-                wide.r0,
-            );
+            let follow = leader.map(|l| l.pace);
             // Behind traffic going its way, the car paces itself on the gap: no fixed
             // pace faster than that is tried (passing it is a detour's business).
             let slowest = pc.pace_fractions.iter().copied().fold(1.0, f64::min) * pc.cruise_speed;
             let cap = follow.map_or(f64::INFINITY, |v| v.clamp(slowest, pc.cruise_speed));
-            let mut speeds: Vec<f64> = pc
-                .pace_fractions
-                .iter()
-                .map(|f| f * pc.cruise_speed)
-                .filter(|&v| v < cap)
-                .chain(follow.map(|_| cap))
-                .collect();
-            speeds.sort_by(|a, b| b.total_cmp(a));
+            let paces = |cap: f64| {
+                let mut speeds: Vec<f64> = pc
+                    .pace_fractions
+                    .iter()
+                    .map(|f| f * pc.cruise_speed)
+                    .filter(|&v| v < cap)
+                    .chain(cap.is_finite().then_some(cap))
+                    .collect();
+                speeds.sort_by(|a, b| b.total_cmp(a));
+                speeds
+            };
+            let speeds = paces(cap);
+            let pass = passing.then(|| Pass {
+                speeds: paces(f64::INFINITY),
+            });
             Pacing {
                 speeds,
                 speed_now: pose.v.max(0.0),
@@ -426,6 +456,7 @@ impl Navigator {
                     .map_or(1.0, |_| ((self.route.length() - s) / pc.horizon_m).max(1.0)),
                 oncoming,
                 keep_right: pc.keep_right,
+                pass,
             }
         });
         let threshold = if self.aligning.is_some() {
@@ -452,6 +483,7 @@ impl Navigator {
             footprint: self.footprint(),
             goal_blocked,
             pacing,
+            pass_goals,
             align,
             current_holds: self.current_path_holds(pose, obstacles),
         }
@@ -965,6 +997,50 @@ mod tests {
             "not followed: {pace}"
         );
         assert!(widest > 1.3 + 1.0, "passed beside it: {widest}");
+    }
+
+    #[test]
+    fn walkers_ahead_keeping_to_their_line_are_passed_on_the_side_not_kept_to() {
+        // Two walkers side by side at 0.7 m/s, 6 m ahead: scored against following
+        // them, no detour pays; the pass lane clears both and may take any pace.
+        let walkers = |vy: f64| {
+            [(6.0, 0.3), (8.0, -0.5)].map(|(x, y)| Circle {
+                vx: 0.7,
+                vy,
+                ..post(x, y, 0.3)
+            })
+        };
+        let pose = car_at(0.0, 0.0, 0.0, 1.0);
+        let plan = |cfg: &ControllerConfig, obstacles: &[Circle]| {
+            let nav = Navigator::new(cfg).expect("navigator");
+            let (trajectory, record) = solve(&nav.request(0.0, &pose, obstacles))
+                .result
+                .expect("planned");
+            assert!(trajectory.is_some(), "{record:?}");
+            record
+        };
+        let mut cfg = east_to(60.0);
+        let record = plan(&cfg, &walkers(0.0));
+        let end = record.path.last().expect("a path");
+        assert!(record.passing, "{record:?}");
+        // The lane: beyond the walker at y = 0.3 by its radius and the car's circle.
+        let r0 = cfg.vehicle.radius + cfg.planner.safety_margin;
+        assert!(
+            end[1] >= 0.3 + 0.3 + r0,
+            "on the left, clear of both: {end:?}"
+        );
+        assert!(record.pace.expect("pace") > 0.7, "{record:?}");
+        // Keeping to the left, the pass goes right.
+        cfg.planner.keep_right = false;
+        let record = plan(&cfg, &walkers(0.0));
+        let end = record.path.last().expect("a path");
+        assert!(record.passing && end[1] <= -(0.5 + 0.3 + r0), "{end:?}");
+        // Walkers crossing the line on their way, or a route ending within a horizon:
+        // followed, not passed.
+        cfg.planner.keep_right = true;
+        assert!(!plan(&cfg, &walkers(0.5)).passing);
+        let short = east_to(cfg.planner.horizon_m - 1.0);
+        assert!(!plan(&short, &walkers(0.0)).passing);
     }
 
     #[test]

@@ -29,6 +29,52 @@ pub struct Pacing {
     pub oncoming: bool,
     /// The side kept to: the right (else the left).
     pub keep_right: bool,
+    /// Set behind traffic going the car's way with the route long enough left: the
+    /// local goals on the pass lane may take any pace ([`Pass`]).
+    pub pass: Option<Pass>,
+}
+
+/// Passing slower traffic going the car's way: the paces a pass may take (every one,
+/// not held to the leader's; the local goals on the pass lane are
+/// `PlanRequest::pass_goals`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pass {
+    /// dx/dt to try, m/s, fastest first.
+    pub speeds: Vec<f64>,
+}
+
+/// The nearest traffic ahead going the car's way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Leader {
+    /// The pace to follow it at, m/s.
+    pub pace: f64,
+    /// It keeps to its line: its speed across the line is at most [`ALONG_LINE`] of its
+    /// speed along it (it can be passed; one crossing the line is only followed).
+    pub along_line: bool,
+}
+
+/// See [`Leader::along_line`].
+const ALONG_LINE: f64 = 0.3;
+
+/// A pass lane clears the traffic it passes by this beyond the car's circle, metres.
+const PASS_CLEARANCE: f64 = 0.3;
+
+/// The lane to pass the traffic ahead going the car's way on, on `side` (+1 left, -1
+/// right) of the line (planning frame, the car at (px, py), `r0` its circle with
+/// margin): its offset from the line, beyond every such obstacle near the line by the
+/// car's circle and [`PASS_CLEARANCE`].
+pub fn pass_lane(obstacles: &[planner::Obstacle], px: f64, py: f64, r0: f64, side: f64) -> f64 {
+    let reach = obstacles
+        .iter()
+        .filter(|o| near_line(o, px, py, r0) && o.vx > TRAFFIC_MIN_SPEED)
+        .map(|o| side * o.y + o.radius)
+        .fold(0.0, f64::max);
+    side * (reach + r0 + PASS_CLEARANCE)
+}
+
+/// Whether `o` is ahead of the car at (px, py) within the traffic band of the line.
+fn near_line(o: &planner::Obstacle, px: f64, py: f64, r0: f64) -> bool {
+    o.x + o.radius > px && (o.y - py).abs() < r0 + o.radius + TRAFFIC_BAND
 }
 
 /// How much more a deviation to the side not kept to costs while giving way.
@@ -46,32 +92,39 @@ const FOLLOW_GAP: f64 = 1.0;
 const FOLLOW_GAIN: f64 = 0.3;
 
 /// What the moving obstacles near the line do (planning frame, the car at (px, py),
-/// `r0` its circle with margin): the pace to follow the nearest going the car's way at
-/// (its speed along the line, plus [`FOLLOW_GAIN`] times the headway error, so the
-/// pace changes with the gap instead of flipping between fixed fractions above and
-/// below the leader's speed), and whether one comes towards the car.
-pub fn traffic(obstacles: &[planner::Obstacle], px: f64, py: f64, r0: f64) -> (Option<f64>, bool) {
-    let mut leader: Option<(f64, f64)> = None;
+/// `r0` its circle with margin): the nearest going the car's way, with the pace to
+/// follow it at (its speed along the line, plus [`FOLLOW_GAIN`] times the headway
+/// error, so the pace changes with the gap instead of flipping between fixed fractions
+/// above and below the leader's speed), and whether one comes towards the car.
+pub fn traffic(
+    obstacles: &[planner::Obstacle],
+    px: f64,
+    py: f64,
+    r0: f64,
+) -> (Option<Leader>, bool) {
+    let mut leader: Option<(f64, &planner::Obstacle)> = None;
     let mut oncoming = false;
     for o in obstacles {
-        let near = o.x + o.radius > px && (o.y - py).abs() < r0 + o.radius + TRAFFIC_BAND;
-        if !near {
+        if !near_line(o, px, py, r0) {
             continue;
         }
         if o.vx > TRAFFIC_MIN_SPEED {
             let gap = (o.x - px).hypot(o.y - py) - o.radius - r0;
             if leader.is_none_or(|l| gap < l.0) {
-                leader = Some((gap, o.vx));
+                leader = Some((gap, o));
             }
         } else if o.vx < -TRAFFIC_MIN_SPEED {
             oncoming = true;
         }
     }
-    let follow = leader.map(|(gap, v)| {
-        let headway = FOLLOW_TIME_GAP * v + FOLLOW_GAP;
-        v + FOLLOW_GAIN * (gap - headway)
+    let leader = leader.map(|(gap, o)| {
+        let headway = FOLLOW_TIME_GAP * o.vx + FOLLOW_GAP;
+        Leader {
+            pace: o.vx + FOLLOW_GAIN * (gap - headway),
+            along_line: o.vy.abs() <= ALONG_LINE * o.vx,
+        }
     });
-    (follow, oncoming)
+    (leader, oncoming)
 }
 
 impl Pacing {
@@ -156,6 +209,7 @@ mod tests {
             time_scale: 1.0,
             oncoming: false,
             keep_right: true,
+            pass: None,
         }
     }
 
@@ -176,10 +230,11 @@ mod tests {
         let (follow, oncoming) = traffic(&[walker(10.0, 0.3, 0.7)], 0.0, 0.0, r0);
         let gap = 10.0f64.hypot(0.3) - 0.3 - r0;
         let want = 0.7 + 0.3 * (gap - (1.5 * 0.7 + 1.0));
-        assert!((follow.expect("a leader") - want).abs() < 1e-12 && !oncoming);
+        let leader = follow.expect("a leader");
+        assert!((leader.pace - want).abs() < 1e-12 && leader.along_line && !oncoming);
         // Closer, slower: the pace drops below the walker's speed to open the gap.
         let (near, _) = traffic(&[walker(4.0, 0.0, 0.7)], 0.0, 0.0, r0);
-        assert!(near.expect("a leader") < 0.7);
+        assert!(near.expect("a leader").pace < 0.7);
         // The nearest leader sets the pace.
         let (both, _) = traffic(
             &[walker(10.0, 0.0, 0.7), walker(4.0, 0.0, 0.7)],
@@ -188,6 +243,13 @@ mod tests {
             r0,
         );
         assert_eq!(both, near);
+        // Crossing the line on the way: followed, not passed.
+        let crossing = planner::Obstacle {
+            vy: 0.5,
+            ..walker(10.0, 0.0, 0.7)
+        };
+        let (leader, _) = traffic(&[crossing], 0.0, 0.0, r0);
+        assert!(!leader.expect("a leader").along_line);
         // Coming towards the car, or far off the line, or behind: no leader.
         assert_eq!(
             traffic(&[walker(15.0, 1.0, -1.5)], 0.0, 0.0, r0),
@@ -206,6 +268,30 @@ mod tests {
             traffic(&[walker(8.0, 0.0, 0.1)], 0.0, 0.0, r0),
             (None, false)
         );
+    }
+
+    #[test]
+    fn the_pass_lane_clears_every_leader_near_the_line_on_its_side() {
+        let r0 = 2.3;
+        let side_by_side = [walker(6.0, 0.3, 0.7), walker(8.0, -0.5, 0.7)];
+        let left = pass_lane(&side_by_side, 0.0, 0.0, r0, 1.0);
+        assert!(
+            (left - (0.3 + 0.3 + r0 + PASS_CLEARANCE)).abs() < 1e-12,
+            "{left}"
+        );
+        let right = pass_lane(&side_by_side, 0.0, 0.0, r0, -1.0);
+        assert!(
+            (right + (0.5 + 0.3 + r0 + PASS_CLEARANCE)).abs() < 1e-12,
+            "{right}"
+        );
+        // Behind the car, oncoming, or far off the line: not passed.
+        let others = [
+            walker(-5.0, 1.0, 0.7),
+            walker(10.0, 1.0, -1.0),
+            walker(10.0, 8.0, 0.7),
+        ];
+        let lane = pass_lane(&others, 0.0, 0.0, r0, 1.0);
+        assert!((lane - (r0 + PASS_CLEARANCE)).abs() < 1e-12, "{lane}");
     }
 
     #[test]

@@ -95,6 +95,34 @@ pub(super) fn local_goal(
         .unwrap_or_else(|| route.local_goal(nominal))
 }
 
+/// `base` moved `shift` metres to its left (negative: right).
+fn shifted(base: &RoutePoint, shift: f64) -> RoutePoint {
+    RoutePoint {
+        x: base.x - shift * base.heading.sin(),
+        y: base.y + shift * base.heading.cos(),
+        ..*base
+    }
+}
+
+/// Local goals to pass slower traffic on a lane `lane` metres to the left of the route
+/// (negative: right): the first local goal and the route's point at half its distance,
+/// shifted onto the lane, each clear ([`Clearance`]).
+pub(super) fn pass_goals(
+    route: &Route,
+    clearance: &Clearance,
+    s: f64,
+    first: &RoutePoint,
+    lane: f64,
+    obstacles: &[Circle],
+) -> Vec<RoutePoint> {
+    let half = route.at(s + (first.s - s) / 2.0);
+    [*first, half]
+        .iter()
+        .map(|base| shifted(base, lane))
+        .filter(|g| clearance.goal_clear(g, obstacles))
+        .collect()
+}
+
 /// Local goals to try when the first has no feasible path (detours): the first
 /// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
 /// its distance, unshifted and shifted the same; each clear ([`Clearance`], the goal
@@ -115,16 +143,11 @@ pub(super) fn detours(
         if base.s - s < pc.horizon_min_m / 2.0 {
             continue;
         }
-        let (nx, ny) = (-base.heading.sin(), base.heading.cos());
         for shift in DETOUR_SHIFTS {
             if i == 0 && shift == 0.0 {
                 continue;
             }
-            let g = RoutePoint {
-                x: base.x + shift * nx,
-                y: base.y + shift * ny,
-                ..base
-            };
+            let g = shifted(&base, shift);
             if clearance.goal_clear(&g, obstacles) {
                 tries.push((shift, g));
             }

@@ -6,7 +6,7 @@ use super::align::Align;
 use super::error::ReplanError;
 use super::footprint::Footprint;
 use super::frame::PathFrame;
-use super::pacing::{Pacing, sweep};
+use super::pacing::{Pacing, Pass, sweep};
 use crate::planner::{self, Interval, Obstacle, PlanOptions, PlanProblem, Trajectory};
 
 /// One replanning, kept for the run's figure and report.
@@ -41,6 +41,9 @@ pub struct PlanRecord {
     /// clears every obstacle now reported ([`PlanRequest::current_holds`]).
     #[serde(default)]
     pub kept: bool,
+    /// A detour passing slower traffic ([`super::Pass`]).
+    #[serde(default)]
+    pub passing: bool,
 }
 
 /// One replanning to do: the problem in the planning frame and the steering limit.
@@ -65,6 +68,9 @@ pub struct PlanRequest {
     pub goal_blocked: bool,
     /// Set when moving obstacles are in view: the paces to try.
     pub pacing: Option<Pacing>,
+    /// Problems towards local goals on the lane to pass slower traffic on (with
+    /// their frames), tried when `pacing` offers a pass.
+    pub pass_goals: Vec<(PlanProblem, PathFrame)>,
     /// Set when the car heads too far from the line: turn towards the goal first.
     pub align: Option<Align>,
     /// The path being followed may be kept if this replanning finds none: planned
@@ -128,7 +134,7 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
         |problem: &PlanProblem, frame: PathFrame, footprint: Option<&Footprint>| PlanOutcome {
             time: req.time,
             frame,
-            result: solve_towards(req, problem, &frame, footprint),
+            result: solve_towards(req, problem, &frame, footprint, None),
         };
     let no_path = |outcome: &PlanOutcome| matches!(outcome.result, Ok((None, _)));
     // The local goal, then the detours in order: the first with a feasible path (or
@@ -199,6 +205,11 @@ fn give_way_or_pass(
                 .collect(),
         )
     };
+    if let Some(pass) = &pacing.pass
+        && let Some(outcome) = pass_by(req, pacing, pass, &deviations)
+    {
+        return Some(outcome);
+    }
     let weigh = match &nominal.result {
         Ok((Some(_), r)) => {
             r.pace.is_some_and(|p| p < SLOWED * fastest)
@@ -235,13 +246,56 @@ fn give_way_or_pass(
     best.map(|b| b.1)
 }
 
+/// Passing slower traffic ([`Pass`]): the local goals on the pass lane
+/// ([`PlanRequest::pass_goals`]), each at its best pace among every pace, and the one
+/// with the least [`Pacing::score`] (deviation from the local goal's line) wins. Behind the leader
+/// only the slow paces are feasible and the car pulls out at the leader's pace; beside
+/// it the fast ones are, and the car goes by; once the leader is behind it is no
+/// traffic, and the next replanning returns to the route. None when no such detour is
+/// feasible (the car then follows).
+fn pass_by(
+    req: &PlanRequest,
+    pacing: &Pacing,
+    pass: &Pass,
+    deviations: &dyn Fn(&PlanOutcome) -> Option<Vec<f64>>,
+) -> Option<PlanOutcome> {
+    let fastest = pass.speeds.iter().copied().fold(0.0, f64::max);
+    let mut best: Option<(f64, PlanOutcome)> = None;
+    for (problem, frame) in &req.pass_goals {
+        let outcome = PlanOutcome {
+            time: req.time,
+            frame: *frame,
+            result: solve_towards(req, problem, frame, None, Some(&pass.speeds)),
+        };
+        let Some(ys) = deviations(&outcome) else {
+            continue;
+        };
+        let deviation = ys.iter().map(|y| y * y).sum::<f64>() / ys.len() as f64;
+        let Some(pace) = outcome.result.as_ref().ok().and_then(|r| r.1.pace) else {
+            continue;
+        };
+        let cost = pacing.score(deviation, pace, fastest);
+        if best.as_ref().is_none_or(|b| cost < b.0) {
+            best = Some((cost, outcome));
+        }
+    }
+    let (_, mut outcome) = best?;
+    if let Ok((_, record)) = &mut outcome.result {
+        record.passing = true;
+    }
+    Some(outcome)
+}
+
 /// One local goal's planning problem solved (see [`solve`]); with a footprint, only
-/// paths along which the car's rectangle clears the static obstacles are taken.
+/// paths along which the car's rectangle clears the static obstacles are taken. Around
+/// moving obstacles at the paces of `speeds` (fastest first), or else of the request's
+/// pacing.
 fn solve_towards(
     req: &PlanRequest,
     p: &PlanProblem,
     frame: &PathFrame,
     footprint: Option<&Footprint>,
+    speeds: Option<&[f64]>,
 ) -> Result<(Option<Trajectory>, PlanRecord), ReplanError> {
     let fits = footprint.map(|f| {
         let statics = f.clip_to_start(p.state.x, p.state.y, p.state.theta, &p.obstacles);
@@ -254,9 +308,10 @@ fn solve_towards(
     };
     let span = p.goal.x - p.state.x;
     let line = p.reference_line().map_err(ReplanError::ReferenceLine)?;
-    let fastest = pacing.speeds.iter().copied().fold(0.0, f64::max);
+    let speeds = speeds.unwrap_or(&pacing.speeds);
+    let fastest = speeds.iter().copied().fold(0.0, f64::max);
     let mut best: Option<(f64, Chosen)> = None;
-    for &pace in &pacing.speeds {
+    for &pace in speeds {
         // The paces come fastest first, and a slower one loses more time: once that
         // alone scores no better than the best path found, none further on can win.
         if best
@@ -389,6 +444,7 @@ fn record(
         passage: false,
         goal_blocked: false,
         kept: false,
+        passing: false,
     };
     (chosen.map(|c| c.trajectory), record)
 }
