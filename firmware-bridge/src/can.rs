@@ -70,6 +70,10 @@ pub struct CanPort<B = CanSocket> {
     rx: E2eRx<'static>,
     undecodable: u64,
     bus_errors: u64,
+    /// The standard IDs handed out, when not all ([`CanPort::hear_only`]).
+    heard: Option<Vec<u16>>,
+    /// Frames received but not handed out (not among `heard`).
+    overheard: u64,
 }
 
 impl<B> CanPort<B>
@@ -85,7 +89,36 @@ where
             rx: E2eRx::new(&NETWORK),
             undecodable: 0,
             bus_errors: 0,
+            heard: None,
+            overheard: 0,
         }
+    }
+
+    /// Hand out only frames with these standard IDs (error frames still come) and
+    /// count the rest ([`CanPort::overheard`]): for a port that must see the whole bus
+    /// (to count its load, to pace its sends) while its node takes only its own
+    /// messages, as a real node's acceptance filter has it. The software twin of
+    /// [`CanPort::accept_only`].
+    pub fn hear_only(&mut self, ids: &[u16]) {
+        self.heard = Some(ids.to_vec());
+    }
+
+    /// Frames received but not handed out ([`CanPort::hear_only`]).
+    pub fn overheard(&self) -> u64 {
+        self.overheard
+    }
+
+    /// Whether `frame` is handed out; counts it as overheard when not.
+    fn hears(&mut self, frame: &B::Frame) -> bool {
+        let heard = match (&self.heard, frame.id()) {
+            (None, _) => true,
+            (Some(ids), Id::Standard(id)) => ids.contains(&id.as_raw()),
+            (Some(_), Id::Extended(_)) => false,
+        };
+        if !heard {
+            self.overheard += 1;
+        }
+        heard
     }
 
     /// The interface name.
@@ -159,13 +192,16 @@ where
 
     /// The next frame if one is waiting (never blocks).
     pub fn try_recv(&mut self) -> Option<Received> {
-        match self.bus.receive() {
-            Ok(frame) => Some(self.classify(&frame)),
-            Err(nb::Error::WouldBlock) => None,
-            Err(nb::Error::Other(e)) => {
-                self.bus_errors += 1;
-                Some(Received::BusError(format!("{e:?}")))
-            }
+        loop {
+            return match self.bus.receive() {
+                Ok(frame) if !self.hears(&frame) => continue,
+                Ok(frame) => Some(self.classify(&frame)),
+                Err(nb::Error::WouldBlock) => None,
+                Err(nb::Error::Other(e)) => {
+                    self.bus_errors += 1;
+                    Some(Received::BusError(format!("{e:?}")))
+                }
+            };
         }
     }
 
@@ -297,15 +333,12 @@ impl CanPort<CanSocket> {
                 return Ok(None);
             }
             match self.bus.read_frame_timeout(left) {
-                Ok(frame) => {
-                    return Ok(Some(match frame {
-                        socketcan::CanFrame::Error(e) => {
-                            self.bus_errors += 1;
-                            Received::BusError(format!("{:?}", e.into_error()))
-                        }
-                        other => self.classify(&other),
-                    }));
+                Ok(socketcan::CanFrame::Error(e)) => {
+                    self.bus_errors += 1;
+                    return Ok(Some(Received::BusError(format!("{:?}", e.into_error()))));
                 }
+                Ok(frame) if !self.hears(&frame) => {}
+                Ok(frame) => return Ok(Some(self.classify(&frame))),
                 Err(e)
                     if matches!(
                         e.kind(),

@@ -127,14 +127,23 @@ fn python_mcap_finds_the_foxglove_schemas_and_the_counts_the_verdict_implies() {
         frames,
         "no other frames"
     );
-    // The steering ECU heard the controller and the throttle ECU, except what was sent
-    // in the last step (at most one throttle report, a heartbeat and two commands).
+    // The steering ECU's port saw the controller and the throttle ECU, except what
+    // was sent in the last step (at most one throttle report, a heartbeat and two
+    // commands); the ECU itself took only its node's messages: the heartbeat and its
+    // commands, the throttle's went past its acceptance filter.
     let heard = st.e2e.accepted + st.e2e.rejected() + st.undecodable;
-    let seen = heard - th.sent;
+    let seen = heard + st.overheard - th.sent;
     assert!(
         (seen..=seen + 4).contains(&controller),
-        "controller frames {controller}, the steering ECU heard {heard}"
+        "controller frames {controller}, the steering ECU's port saw {}",
+        heard + st.overheard
     );
+    let for_steering = of("080") + of("100");
+    assert!(
+        (heard..=heard + 2).contains(&for_steering),
+        "heartbeats and steering commands {for_steering}, the steering ECU heard {heard}"
+    );
+    assert!(st.overheard + 2 >= of("110") + th.sent, "{st:?}");
 }
 
 #[test]

@@ -21,6 +21,8 @@ pub struct NodeStats {
     pub e2e: E2eStats,
     pub undecodable: u64,
     pub bus_errors: u64,
+    /// Other nodes' frames its port saw and its acceptance filter kept from it.
+    pub overheard: u64,
     pub sent: u64,
     /// Times the safe state was entered: command timeout, heartbeat timeout, estop,
     /// fault report, second sender, its own hardware fault (the simulated ECU's; zero
@@ -98,13 +100,17 @@ pub struct Station<B> {
 }
 
 impl<B: Can> Station<B> {
-    /// The ECU `kind` on `port`, simulated or physical as `device` says.
+    /// The ECU `kind` on `port`, simulated or physical as `device` says. The ECU takes
+    /// only its node's messages (an ECU's acceptance filter: another node's stream is
+    /// not its business, not even a gap in its counter); the port still sees, and
+    /// counts, the others'.
     pub fn new(
         kind: EcuKind,
         device: &EcuDevice,
         sections: &EcuSections<'_>,
-        port: CanPort<B>,
+        mut port: CanPort<B>,
     ) -> Self {
+        port.hear_only(&kind.accepts());
         Station {
             kind,
             twin: match device {
@@ -253,9 +259,10 @@ impl<B: Can> Station<B> {
         Ok(())
     }
 
-    /// Every frame this station has seen cross the bus: received, and sent.
+    /// Every frame this station has seen cross the bus: received (its node's and the
+    /// others'), and sent.
     pub fn bus_frames(&self) -> u64 {
-        self.received + self.sent + self.raw_sent
+        self.received + self.port.overheard() + self.sent + self.raw_sent
     }
 
     /// Each entry into the safe state (reported disabled after being enabled):
@@ -299,6 +306,7 @@ impl<B: Can> Station<B> {
             e2e: self.port.stats(),
             undecodable: self.port.undecodable(),
             bus_errors: self.port.bus_errors(),
+            overheard: self.port.overheard(),
             sent: self.sent,
             safe_state_trips: match &self.twin {
                 Twin::Simulated(node) => node.safety_ref().trips,
