@@ -110,11 +110,7 @@ where
 
     /// Whether `frame` is handed out; counts it as overheard when not.
     fn hears(&mut self, frame: &B::Frame) -> bool {
-        let heard = match (&self.heard, frame.id()) {
-            (None, _) => true,
-            (Some(ids), Id::Standard(id)) => ids.contains(&id.as_raw()),
-            (Some(_), Id::Extended(_)) => false,
-        };
+        let heard = accepted(self.heard.as_deref(), frame.id());
         if !heard {
             self.overheard += 1;
         }
@@ -257,6 +253,16 @@ fn open_error(iface: &str, source: io::Error) -> BridgeError {
             iface: iface.to_owned(),
             source,
         },
+    }
+}
+
+/// Whether a frame with `id` passes an acceptance filter of standard IDs (`None`:
+/// every frame passes).
+fn accepted(ids: Option<&[u16]>, id: Id) -> bool {
+    match (ids, id) {
+        (None, _) => true,
+        (Some(ids), Id::Standard(id)) => ids.contains(&id.as_raw()),
+        (Some(_), Id::Extended(_)) => false,
     }
 }
 

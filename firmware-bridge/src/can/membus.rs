@@ -104,11 +104,7 @@ struct Inbox {
 
 impl Inbox {
     fn accepts(&self, frame: &MemFrame) -> bool {
-        match (&self.accepts, frame.id) {
-            (None, _) => true,
-            (Some(ids), Id::Standard(id)) => ids.contains(&id.as_raw()),
-            (Some(_), Id::Extended(_)) => false,
-        }
+        super::accepted(self.accepts.as_deref(), frame.id)
     }
 }
 
