@@ -51,7 +51,9 @@
 //!   ([`pacing::traffic`]); when traffic slows the local goal's path, or it swerves
 //!   past oncoming traffic on the side not kept to, the detours are weighed against
 //!   it (deviation, dearer on that side, plus time lost), so the car gives way
-//!   sideways before it slows or stops.
+//!   sideways before it slows or stops. A leader keeping to its line, with a horizon
+//!   of route left, is passed on the side not kept to: local goals on a lane clear of
+//!   it, at every pace, are taken first ([`pacing::pass_lane`], `solver::pass_by`).
 //! - Headings the polynomial cannot start from: beyond `align_enter_deg` from the
 //!   line, the car first turns towards the goal on the planned steering limit at low
 //!   speed, when the whole turning circle is clear ([`Align`]), until within

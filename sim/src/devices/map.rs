@@ -215,7 +215,7 @@ impl DeviceMap {
             let node = match device {
                 "steering" => EcuKind::Steering.node(),
                 "throttle" => EcuKind::Throttle.node(),
-                _ => "CONTROLLER",
+                _ => ugv_controller::runtime::NODE,
             };
             match buses.iter_mut().find(|(bus, _)| bus == can) {
                 Some((_, nodes)) => nodes.push(node),
