@@ -98,9 +98,9 @@ pub use error::{GuidanceError, ReplanError};
 pub use follower::{FollowInputs, SteeringLaw};
 pub use footprint::Footprint;
 pub use frame::{Circle, PathFrame};
-pub use pacing::{Pacing, Pass, sweep};
+pub use pacing::{Pacing, sweep};
 pub use reverse::Reverse;
-pub use solver::{PlanOutcome, PlanRecord, PlanRequest, solve};
+pub use solver::{Pass, PlanOutcome, PlanRecord, PlanRequest, solve};
 
 use crate::config::ControllerConfig;
 use crate::localisation::Pose;
@@ -398,19 +398,34 @@ impl Navigator {
         let goal_blocked = !search::clear_of(&end, obstacles, narrow.r0);
         let theta = wrap(pose.theta - frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
-        let (leader, oncoming) = pacing::traffic(
-            &problem.obstacles,
-            problem.state.x,
-            problem.state.y,
-            wide.r0,
-        );
+        let (leader, oncoming) = match any_moving {
+            true => pacing::traffic(
+                &problem.obstacles,
+                problem.state.x,
+                problem.state.y,
+                wide.r0,
+            ),
+            false => (None, false),
+        };
+        let follow = leader.map(|l| l.pace);
+        // Behind traffic going its way, the car paces itself on the gap: no fixed pace
+        // faster than that is tried (passing it is a detour's business, and the pass's).
+        let paces = |cap: f64| {
+            let mut speeds: Vec<f64> = pc
+                .pace_fractions
+                .iter()
+                .map(|f| f * pc.cruise_speed)
+                .filter(|&v| v < cap)
+                .chain(cap.is_finite().then_some(cap))
+                .collect();
+            speeds.sort_by(|a, b| b.total_cmp(a));
+            speeds
+        };
         // Traffic keeping to its line is passed on the side not kept to, on a lane
         // clear of it, while the route has at least a horizon left to pass it in.
-        let passing = any_moving
-            && leader.is_some_and(|l| l.along_line)
-            && self.route.length() - s >= pc.horizon_m;
-        let pass_goals = match passing {
-            true => {
+        let pass = (leader.is_some_and(|l| l.along_line)
+            && self.route.length() - s >= pc.horizon_m)
+            .then(|| {
                 let side = if pc.keep_right { 1.0 } else { -1.0 };
                 let lane = pacing::pass_lane(
                     &problem.obstacles,
@@ -419,34 +434,18 @@ impl Navigator {
                     wide.r0,
                     side,
                 );
-                problems(
-                    &search::pass_goals(&self.route, &wide, s, &goal, lane, obstacles),
-                    wide.r0,
-                )
-            }
-            false => Vec::new(),
-        };
+                Pass {
+                    goals: problems(
+                        &search::pass_goals(&self.route, &wide, s, &goal, lane, obstacles),
+                        wide.r0,
+                    ),
+                    speeds: paces(f64::INFINITY),
+                }
+            });
         let pacing = any_moving.then(|| {
-            let follow = leader.map(|l| l.pace);
-            // Behind traffic going its way, the car paces itself on the gap: no fixed
-            // pace faster than that is tried (passing it is a detour's business).
             let slowest = pc.pace_fractions.iter().copied().fold(1.0, f64::min) * pc.cruise_speed;
             let cap = follow.map_or(f64::INFINITY, |v| v.clamp(slowest, pc.cruise_speed));
-            let paces = |cap: f64| {
-                let mut speeds: Vec<f64> = pc
-                    .pace_fractions
-                    .iter()
-                    .map(|f| f * pc.cruise_speed)
-                    .filter(|&v| v < cap)
-                    .chain(cap.is_finite().then_some(cap))
-                    .collect();
-                speeds.sort_by(|a, b| b.total_cmp(a));
-                speeds
-            };
             let speeds = paces(cap);
-            let pass = passing.then(|| Pass {
-                speeds: paces(f64::INFINITY),
-            });
             Pacing {
                 speeds,
                 speed_now: pose.v.max(0.0),
@@ -458,7 +457,6 @@ impl Navigator {
                     .map_or(1.0, |_| ((self.route.length() - s) / pc.horizon_m).max(1.0)),
                 oncoming,
                 keep_right: pc.keep_right,
-                pass,
             }
         });
         let threshold = if self.aligning.is_some() {
@@ -485,7 +483,7 @@ impl Navigator {
             footprint: self.footprint(),
             goal_blocked,
             pacing,
-            pass_goals,
+            pass,
             align,
             current_holds: self.current_path_holds(pose, obstacles),
         }

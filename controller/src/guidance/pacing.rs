@@ -29,18 +29,6 @@ pub struct Pacing {
     pub oncoming: bool,
     /// The side kept to: the right (else the left).
     pub keep_right: bool,
-    /// Set behind traffic going the car's way with the route long enough left: the
-    /// local goals on the pass lane may take any pace ([`Pass`]).
-    pub pass: Option<Pass>,
-}
-
-/// Passing slower traffic going the car's way: the paces a pass may take (every one,
-/// not held to the leader's; the local goals on the pass lane are
-/// `PlanRequest::pass_goals`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Pass {
-    /// dx/dt to try, m/s, fastest first.
-    pub speeds: Vec<f64>,
 }
 
 /// The nearest traffic ahead going the car's way.
@@ -209,7 +197,6 @@ mod tests {
             time_scale: 1.0,
             oncoming: false,
             keep_right: true,
-            pass: None,
         }
     }
 

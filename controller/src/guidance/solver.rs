@@ -6,7 +6,7 @@ use super::align::Align;
 use super::error::ReplanError;
 use super::footprint::Footprint;
 use super::frame::PathFrame;
-use super::pacing::{Pacing, Pass, sweep};
+use super::pacing::{Pacing, sweep};
 use crate::planner::{self, Interval, Obstacle, PlanOptions, PlanProblem, Trajectory};
 
 /// One replanning, kept for the run's figure and report.
@@ -41,9 +41,19 @@ pub struct PlanRecord {
     /// clears every obstacle now reported ([`PlanRequest::current_holds`]).
     #[serde(default)]
     pub kept: bool,
-    /// A detour passing slower traffic ([`super::Pass`]).
+    /// A detour passing slower traffic ([`Pass`]).
     #[serde(default)]
     pub passing: bool,
+}
+
+/// Passing slower traffic going the car's way: problems towards local goals on a lane
+/// clear of it (with their frames), and the paces they may take (every one, not held
+/// to the leader's).
+#[derive(Clone, Debug)]
+pub struct Pass {
+    pub goals: Vec<(PlanProblem, PathFrame)>,
+    /// dx/dt to try, m/s, fastest first.
+    pub speeds: Vec<f64>,
 }
 
 /// One replanning to do: the problem in the planning frame and the steering limit.
@@ -68,9 +78,8 @@ pub struct PlanRequest {
     pub goal_blocked: bool,
     /// Set when moving obstacles are in view: the paces to try.
     pub pacing: Option<Pacing>,
-    /// Problems towards local goals on the lane to pass slower traffic on (with
-    /// their frames), tried when `pacing` offers a pass.
-    pub pass_goals: Vec<(PlanProblem, PathFrame)>,
+    /// Set behind traffic going the car's way with the route long enough left.
+    pub pass: Option<Pass>,
     /// Set when the car heads too far from the line: turn towards the goal first.
     pub align: Option<Align>,
     /// The path being followed may be kept if this replanning finds none: planned
@@ -205,7 +214,7 @@ fn give_way_or_pass(
                 .collect(),
         )
     };
-    if let Some(pass) = &pacing.pass
+    if let Some(pass) = &req.pass
         && let Some(outcome) = pass_by(req, pacing, pass, &deviations)
     {
         return Some(outcome);
@@ -246,10 +255,10 @@ fn give_way_or_pass(
     best.map(|b| b.1)
 }
 
-/// Passing slower traffic ([`Pass`]): the local goals on the pass lane
-/// ([`PlanRequest::pass_goals`]), each at its best pace among every pace, and the one
-/// with the least [`Pacing::score`] (deviation from the local goal's line) wins. Behind the leader
-/// only the slow paces are feasible and the car pulls out at the leader's pace; beside
+/// Passing slower traffic ([`Pass`]): the local goals on the pass lane, each at its
+/// best pace among every pace, and the one with the least [`Pacing::score`]
+/// (deviation from the local goal's line) wins. Behind the leader only the slow paces
+/// are feasible and the car pulls out at the leader's pace; beside
 /// it the fast ones are, and the car goes by; once the leader is behind it is no
 /// traffic, and the next replanning returns to the route. None when no such detour is
 /// feasible (the car then follows).
@@ -261,7 +270,7 @@ fn pass_by(
 ) -> Option<PlanOutcome> {
     let fastest = pass.speeds.iter().copied().fold(0.0, f64::max);
     let mut best: Option<(f64, PlanOutcome)> = None;
-    for (problem, frame) in &req.pass_goals {
+    for (problem, frame) in &pass.goals {
         let outcome = PlanOutcome {
             time: req.time,
             frame: *frame,
