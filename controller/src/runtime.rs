@@ -447,6 +447,12 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         }
     }
 
+    /// The trace's last records (the state at `now`), flushed: for a loop stopped from
+    /// outside (a replay at the recording's end) rather than by [`Runtime::step`].
+    pub fn finish_trace(&mut self, now: f64) {
+        self.write_trace(now, true);
+    }
+
     /// One tick at controller time `now`: inputs, the controller, outputs, the trace.
     /// `Some` when the loop has ended (the trace is then complete).
     pub fn step(&mut self, now: f64) -> Option<Exit> {

@@ -26,6 +26,7 @@ use firmware_bridge::cli::number;
 use firmware_bridge::clock::WallClock;
 use firmware_bridge::realtime;
 use ugv_controller::config::FollowerKind;
+use ugv_controller::trace::TraceWriter;
 use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
 use ugv_sim::ecu::station::run_standalone;
@@ -95,6 +96,11 @@ enum Command {
     Replay {
         /// The recording (run.mcap of a run's results).
         recording: PathBuf,
+        /// Write the replayed controller's trace here (JSON lines, the format of
+        /// `ugv-controller --trace`: its samples, plans and states), to set beside
+        /// the recorded controller-trace.jsonl.
+        #[arg(long, value_name = "FILE")]
+        trace: Option<PathBuf>,
     },
     /// Validate scenario files: parse, check every field, and report the first error
     /// of each with its file, line and field.
@@ -325,7 +331,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             rt_priority,
         } => run_ecu(kind, &can, scenario.as_ref(), status_every, rt_priority),
         Command::Suite(args) => run_suite(args),
-        Command::Replay { recording } => replay(&recording),
+        Command::Replay { recording, trace } => replay(&recording, trace.as_deref()),
         Command::Merge { shards, out } => merge_shards(&shards, &out),
     }
 }
@@ -390,17 +396,25 @@ fn run_ecu(
     Ok(ExitCode::SUCCESS)
 }
 
-fn replay(path: &std::path::Path) -> Result<ExitCode> {
+fn replay(path: &std::path::Path, trace: Option<&std::path::Path>) -> Result<ExitCode> {
     use ugv_sim::record::replay::{Recorded, Tolerance, replay};
     let started = std::time::Instant::now();
     let rec = Recorded::read(path)?;
+    let trace = trace
+        .map(|p| {
+            let file = std::fs::File::create(p)
+                .with_context(|| format!("creating the trace {}", p.display()))?;
+            TraceWriter::new(Some(file), None)
+                .with_context(|| format!("writing the trace {}", p.display()))
+        })
+        .transpose()?;
     if let Some(why) = &rec.truncated {
         eprintln!(
             "ugv-sim: {} ends early ({why}): replaying what it holds",
             path.display()
         );
     }
-    let report = replay(&rec, Tolerance::for_mode(rec.info.mode))?;
+    let report = replay(&rec, Tolerance::for_mode(rec.info.mode), trace)?;
     let wall = started.elapsed().as_secs_f64();
     let compared: u64 = report.messages.values().map(|m| m.replayed).sum();
     eprintln!(

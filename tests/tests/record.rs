@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use ugv_controller::config::FollowerKind;
+use ugv_controller::trace::{Trace, TraceWriter};
 use ugv_e2e_tests::workspace_bin;
 use ugv_sim::Scenario;
 use ugv_sim::mission::controller_config;
@@ -190,10 +191,13 @@ fn ugv_can_decode_reads_bus_log_frame_for_frame() {
 #[test]
 fn a_sil_recording_replays_byte_for_byte() {
     let dir = tempfile::tempdir().unwrap();
-    recorded_paper_run(dir.path(), Some(6.0));
+    let (_, run) = recorded_paper_run(dir.path(), Some(6.0));
     let rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
     assert_eq!(rec.truncated, None);
-    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    // The replayed controller's trace, as `ugv-sim replay --trace` writes it.
+    let trace_path = dir.path().join("replay-trace.jsonl");
+    let writer = TraceWriter::new(Some(std::fs::File::create(&trace_path).unwrap()), None);
+    let report = replay(&rec, Tolerance::EXACT, Some(writer.unwrap())).unwrap();
     assert_eq!(report.divergence, None, "{report:?}");
     for name in ["CONTROLLER_HEARTBEAT", "STEERING_CMD", "THROTTLE_CMD"] {
         let m = &report.messages[name];
@@ -201,6 +205,43 @@ fn a_sil_recording_replays_byte_for_byte() {
         assert_eq!((m.replayed, m.matched), (m.recorded, m.recorded), "{name}");
     }
     assert!(report.controller_exit.is_none(), "{report:?}");
+    assert_eq!(report.trace_error, None);
+    // It planned the run's paths at the run's instants and steered as the run did.
+    let replayed = Trace::from_jsonl(&std::fs::read_to_string(&trace_path).unwrap()).unwrap();
+    assert!(run.trace.plans.len() >= 10, "{}", run.trace.plans.len());
+    assert_eq!(
+        serde_json::to_value(&replayed.plans).unwrap(),
+        serde_json::to_value(&run.trace.plans).unwrap()
+    );
+    assert_eq!(replayed.samples.len(), run.trace.samples.len());
+    assert_eq!(
+        serde_json::to_value(&replayed.samples).unwrap(),
+        serde_json::to_value(&run.trace.samples).unwrap()
+    );
+    // The command line writes the same trace, and names a trace it cannot create.
+    let cli = |trace: &Path| {
+        Command::new(workspace_bin("ugv-sim").unwrap())
+            .arg("replay")
+            .arg(dir.path().join(MCAP_FILE))
+            .arg("--trace")
+            .arg(trace)
+            .output()
+            .unwrap()
+    };
+    let cli_trace = dir.path().join("cli-trace.jsonl");
+    let out = cli(&cli_trace);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert_eq!(
+        std::fs::read_to_string(&cli_trace).unwrap(),
+        std::fs::read_to_string(&trace_path).unwrap()
+    );
+    let out = cli(&dir.path().join("absent/trace.jsonl"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(
+        stderr.contains("absent/trace.jsonl") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
 }
 
 #[test]
@@ -210,7 +251,7 @@ fn a_changed_controller_diverges_and_the_replay_says_where() {
     let mut rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
     // Another controller (a slower steering loop): its steering commands differ.
     rec.config.follower.omega *= 0.5;
-    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    let report = replay(&rec, Tolerance::EXACT, None).unwrap();
     let d = report.divergence.expect("a divergence");
     assert_eq!(d.message, "STEERING_CMD", "{d:?}");
     assert!(d.signal.is_some() && d.recorded != d.replayed, "{d:?}");
@@ -226,10 +267,10 @@ fn the_hil_tolerance_still_catches_a_changed_controller() {
     let dir = tempfile::tempdir().unwrap();
     recorded_paper_run(dir.path(), Some(12.0));
     let mut rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
-    let report = replay(&rec, Tolerance::HIL).unwrap();
+    let report = replay(&rec, Tolerance::HIL, None).unwrap();
     assert_eq!(report.divergence, None, "{report:#?}");
     rec.config.follower.omega *= 0.5;
-    let report = replay(&rec, Tolerance::HIL).unwrap();
+    let report = replay(&rec, Tolerance::HIL, None).unwrap();
     let d = report.divergence.expect("a changed controller diverges");
     assert_eq!(d.message, "STEERING_CMD", "{d:?}");
     assert!(d.time_s >= Tolerance::HIL.settle_s, "{d:?}");
@@ -333,7 +374,7 @@ fn a_killed_simulator_leaves_its_recording_readable_to_a_second_before() {
     assert!(!nmea.is_empty());
     let rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
     assert!(rec.truncated.is_some());
-    let report = replay(&rec, Tolerance::EXACT).unwrap();
+    let report = replay(&rec, Tolerance::EXACT, None).unwrap();
     assert!(report.replayed_s >= ran - 1.5, "{report:?}");
     // Up to where the file was cut the commands are the recorded ones; past it the
     // replay may have produced one tick the file lost.

@@ -26,6 +26,7 @@ use serde::Serialize;
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::core::{COMMAND_PERIOD, Controller};
 use ugv_controller::runtime::{MemGps, MemLaser, Runtime};
+use ugv_controller::trace::TraceWriter;
 
 use super::tap::{BusTap, TapFrame};
 use super::{CONFIG_ATTACHMENT, RUN_METADATA, RecordMode, RunInfo, topics};
@@ -435,6 +436,8 @@ pub struct ReplayReport {
     pub skipped_frames: u64,
     /// How the controller's loop ended during the replay, if it did.
     pub controller_exit: Option<String>,
+    /// Why writing the replayed controller's trace stopped, if it did.
+    pub trace_error: Option<String>,
 }
 
 impl ReplayReport {
@@ -748,8 +751,14 @@ fn feed(rt: &mut Runtime<MemGps, MemLaser, MemEndpoint>, ecus: &mut MemEndpoint,
 }
 
 /// Replay `rec` into the controller library and compare its commands with the
-/// recorded ones within `tol`.
-pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayError> {
+/// recorded ones within `tol`; `trace`, when given, gets the replayed controller's
+/// trace (the format of the binary's `--trace`, to set beside the recorded
+/// `controller-trace.jsonl`).
+pub fn replay(
+    rec: &Recorded,
+    tol: Tolerance,
+    trace: Option<TraceWriter>,
+) -> Result<ReplayReport, ReplayError> {
     let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?;
     let bus = MemBus::new();
     // The binary replans on a thread and takes the plan at the next tick.
@@ -768,6 +777,9 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         MemLaser::default(),
         can,
     );
+    if let Some(w) = trace {
+        rt = rt.with_trace(w);
+    }
     // The ECUs' side of the bus: recorded reports go out, the controller's come in.
     let mut ecus: MemEndpoint = bus.endpoint();
     let mut heard: Vec<TapFrame> = Vec::new();
@@ -822,6 +834,9 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         }
     }
     cmp.close_before(u64::MAX);
+    if exit.is_none() {
+        rt.finish_trace(replayed_s);
+    }
     Ok(ReplayReport {
         scenario: rec.info.scenario.clone(),
         mode: rec.info.mode,
@@ -834,6 +849,7 @@ pub fn replay(rec: &Recorded, tol: Tolerance) -> Result<ReplayReport, ReplayErro
         truncated: rec.truncated.clone(),
         skipped_frames: rec.skipped,
         controller_exit: exit,
+        trace_error: rt.trace_error().map(str::to_owned),
     })
 }
 
