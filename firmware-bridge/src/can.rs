@@ -122,6 +122,11 @@ where
         &self.name
     }
 
+    /// The bus endpoint it wraps.
+    pub fn endpoint(&self) -> &B {
+        &self.bus
+    }
+
     /// Send a typed message, protected with the ID's next counter and the CRC.
     pub fn send<M: CanMessage>(&mut self, message: &M) -> Result<(), BridgeError> {
         let data = self
@@ -254,6 +259,42 @@ fn open_error(iface: &str, source: io::Error) -> BridgeError {
             source,
         },
     }
+}
+
+/// The receive queue the simulator's sockets ask for, bytes: a CAN frame takes
+/// about 1 KiB of it in the kernel (its buffer's true size), so the default
+/// (`net.core.rmem_default`, 208 KiB) holds some 200 frames, a quarter of a second of
+/// a loaded bus, and a reader stalled longer than that (a busy host, an emulated
+/// guest) loses frames. 16 MiB holds over ten seconds of a saturated 500 kbit/s bus.
+pub const DEEP_QUEUE_BYTES: usize = 16 << 20;
+
+/// SO_MEMINFO (asm-generic/socket.h; x86 and arm share it) and its DROPS slot.
+const SO_MEMINFO: libc::c_int = 55;
+const SK_MEMINFO_DROPS: usize = 8;
+
+/// Ask for a receive queue of `bytes` on `socket`: `SO_RCVBUFFORCE` with
+/// CAP_NET_ADMIN, else `SO_RCVBUF`, which the kernel caps at `net.core.rmem_max`.
+pub fn set_receive_queue(socket: &CanSocket, bytes: usize) -> nix::Result<()> {
+    use nix::sys::socket::{setsockopt, sockopt};
+    if setsockopt(socket, sockopt::RcvBufForce, &bytes).is_err() {
+        setsockopt(socket, sockopt::RcvBuf, &bytes)?;
+    }
+    Ok(())
+}
+
+/// The kernel's count of frames dropped because `socket`'s receive queue was full
+/// (SO_MEMINFO), at any time.
+pub fn queue_drops(socket: &CanSocket) -> Option<u32> {
+    let mut buf = [0u8; 4 * (SK_MEMINFO_DROPS + 1)];
+    let n = socketcan::SocketOptions::get_socket_option_bytes(
+        socket,
+        libc::SOL_SOCKET,
+        SO_MEMINFO,
+        &mut buf,
+    )
+    .ok()?;
+    let at = 4 * SK_MEMINFO_DROPS;
+    (n >= at + 4).then(|| u32::from_ne_bytes([buf[at], buf[at + 1], buf[at + 2], buf[at + 3]]))
 }
 
 /// Whether a frame with `id` passes an acceptance filter of standard IDs (`None`:

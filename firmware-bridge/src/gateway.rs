@@ -152,7 +152,7 @@ impl Default for GatewayConfig {
             physical_nodes: Vec::new(),
             log: None,
             tx_give_up_ms: 1000,
-            rcvbuf_bytes: 16 << 20,
+            rcvbuf_bytes: crate::can::DEEP_QUEUE_BYTES,
         }
     }
 }

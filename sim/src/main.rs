@@ -22,6 +22,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use firmware_bridge::CanPort;
+use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::cli::number;
 use firmware_bridge::clock::WallClock;
 use firmware_bridge::realtime;
@@ -357,7 +358,11 @@ fn run_ecu(
         "--status-every must be positive"
     );
     let sc = Scenario::load_or_paper(scenario)?;
-    let port = CanPort::open(can).with_context(|| format!("{kind:?} ECU on {can}"))?;
+    // Read through a horizon, with a deep queue: a stalled host does not make it
+    // miss the controller's frames (firmware_bridge::can::timed).
+    let horizon = Horizon::new();
+    let port = CanPort::open_timed(can, horizon.clone(), None)
+        .with_context(|| format!("{kind:?} ECU on {can}"))?;
     port.accept_only(&kind.accepts())
         .with_context(|| format!("{kind:?} ECU's acceptance filter on {can}"))?;
     let stop = stop_on_signal()?;
@@ -372,6 +377,7 @@ fn run_ecu(
         kind,
         &sc.ecu_sections(),
         port,
+        Some(&horizon),
         &mut clock,
         &stop,
         status_every,

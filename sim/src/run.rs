@@ -391,6 +391,11 @@ impl<B: Can> Sim<B> {
         }
     }
 
+    /// The two ECUs' ports on the bus: steering, throttle.
+    pub fn ecu_ports(&self) -> (&CanPort<B>, &CanPort<B>) {
+        (self.steering.port(), self.throttle.port())
+    }
+
     /// CAN statistics of the two ECUs.
     pub fn node_stats(&self) -> (NodeStats, NodeStats) {
         (self.steering.stats(), self.throttle.stats())

@@ -297,3 +297,61 @@ fn a_timed_socket_hands_out_only_the_frames_that_arrived_by_its_horizon() -> Res
     ensure!(take(&mut timed)?.is_none());
     Ok(())
 }
+
+/// A reader stalled while a burst crosses the bus: the timed socket's deep queue
+/// (`DEEP_QUEUE_BYTES`) keeps every frame and the kernel drops none, where a socket
+/// with the kernel's usual default queue (208 KiB) loses most of them and the
+/// kernel counts what it dropped (the figure the HIL verdict reports per ECU).
+#[test]
+fn a_stalled_timed_socket_keeps_every_frame_of_a_burst_a_default_queue_drops_them() -> Result<()> {
+    use embedded_can::nb::Can;
+    use firmware_bridge::can::timed::{Horizon, TimedSocket};
+    use firmware_bridge::can::{queue_drops, set_receive_queue};
+    use socketcan::{CanSocket, Socket};
+
+    const BURST: usize = 3000;
+    let vcan = TestVcan::new("deep")?;
+    let mut timed = TimedSocket::open(&vcan.name, Horizon::new())?;
+    let shallow = CanSocket::open(&vcan.name)?;
+    shallow.set_nonblocking(true)?;
+    set_receive_queue(&shallow, 212_992 / 2).context("the usual default queue")?;
+    let mut sender = CanPort::open(&vcan.name)?;
+    for n in 0..BURST {
+        let data = (n as u32).to_le_bytes();
+        // The sender's own queue may be full for a moment: try again.
+        let mut tries = 0;
+        while let Err(e) = sender.send_bytes(0x123, &data) {
+            tries += 1;
+            ensure!(tries < 1000, "sending frame {n}: {e}");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    // Only now do the readers look.
+    ensure!(timed.queue_drops() == Some(0), "{:?}", timed.queue_drops());
+    let mut kept = Vec::new();
+    loop {
+        match timed.receive() {
+            Ok(f) => {
+                let d = embedded_can::Frame::data(&f);
+                kept.push(u32::from_le_bytes([d[0], d[1], d[2], d[3]]));
+            }
+            Err(nb::Error::WouldBlock) => break,
+            Err(nb::Error::Other(e)) => anyhow::bail!("receive: {e}"),
+        }
+    }
+    ensure!(
+        kept == (0..BURST as u32).collect::<Vec<_>>(),
+        "the deep queue kept {} of {BURST} frames",
+        kept.len()
+    );
+    let mut read = 0;
+    while shallow.read_frame().is_ok() {
+        read += 1;
+    }
+    let dropped = queue_drops(&shallow).context("SO_MEMINFO")?;
+    ensure!(
+        read < BURST / 2 && read + dropped as usize == BURST,
+        "the default queue kept {read} and dropped {dropped} of {BURST}"
+    );
+    Ok(())
+}

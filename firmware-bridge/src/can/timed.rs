@@ -70,17 +70,28 @@ pub struct TimedSocket {
 }
 
 impl TimedSocket {
-    /// Open `iface` non-blocking with kernel receive timestamps.
+    /// Open `iface` non-blocking with kernel receive timestamps and a receive queue
+    /// of [`super::DEEP_QUEUE_BYTES`]: a stall of the loop that reads it then ends
+    /// with the frames that came meanwhile waiting, for the catch-up ticks to take in
+    /// their own periods, rather than dropped by the kernel once its default queue
+    /// (a quarter of a second of a loaded bus) is full.
     pub fn open(iface: &str, horizon: Horizon) -> io::Result<TimedSocket> {
         let socket = CanSocket::open(iface)?;
         socket.set_nonblocking(true)?;
         socket.set_recv_timestamp(true)?;
+        super::set_receive_queue(&socket, super::DEEP_QUEUE_BYTES)?;
         Ok(TimedSocket {
             socket,
             horizon,
             held: None,
             pacer: None,
         })
+    }
+
+    /// The kernel's count of frames it dropped because this socket's receive queue was
+    /// full.
+    pub fn queue_drops(&self) -> Option<u32> {
+        super::queue_drops(&self.socket)
     }
 
     /// Send through `pacer` from now on (see [`super::paced`]): a frame goes onto

@@ -42,9 +42,6 @@ pub const CAN_MTU: usize = 16;
 const ARPHRD_CAN: u32 = 280;
 /// IFF_UP in /sys/class/net/*/flags.
 const IFF_UP: u32 = 0x1;
-/// SO_MEMINFO (asm-generic/socket.h; x86 and arm share it) and its DROPS slot.
-const SO_MEMINFO: libc::c_int = 55;
-const SK_MEMINFO_DROPS: usize = 8;
 
 /// A frame as read from the kernel.
 #[derive(Debug, Clone, Copy)]
@@ -185,11 +182,7 @@ impl GatewaySocket {
             .map_err(errno("turning SO_TIMESTAMPNS on"))?;
         socket::setsockopt(&socket, sockopt::RxqOvfl, &1)
             .map_err(errno("turning SO_RXQ_OVFL on"))?;
-        if socket::setsockopt(&socket, sockopt::RcvBufForce, &rcvbuf).is_err() {
-            // No CAP_NET_ADMIN: as much as net.core.rmem_max allows.
-            socket::setsockopt(&socket, sockopt::RcvBuf, &rcvbuf)
-                .map_err(errno("setting SO_RCVBUF"))?;
-        }
+        crate::can::set_receive_queue(&socket, rcvbuf).map_err(errno("setting SO_RCVBUF"))?;
         socket
             .set_read_timeout(read_timeout)
             .map_err(err("setting the receive timeout"))?;
@@ -214,13 +207,7 @@ impl GatewaySocket {
     /// The kernel's count of frames dropped because this socket's receive queue was
     /// full (SO_MEMINFO), at any time (SO_RXQ_OVFL only tells with the next frame).
     pub fn kernel_drops(&self) -> Option<u32> {
-        let mut buf = [0u8; 4 * (SK_MEMINFO_DROPS + 1)];
-        let n = self
-            .socket
-            .get_socket_option_bytes(libc::SOL_SOCKET, SO_MEMINFO, &mut buf)
-            .ok()?;
-        let at = 4 * SK_MEMINFO_DROPS;
-        (n >= at + 4).then(|| u32::from_ne_bytes([buf[at], buf[at + 1], buf[at + 2], buf[at + 3]]))
+        crate::can::queue_drops(&self.socket)
     }
 
     /// A buffer for [`GatewaySocket::read`]'s control messages.

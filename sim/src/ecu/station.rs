@@ -6,6 +6,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use embedded_can::nb::Can;
+use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::clock::Clock;
 use firmware_bridge::{BridgeError, CanPort, Received};
 use golf_car_can::{E2eStats, GolfCarMessage, Payload};
@@ -31,6 +32,10 @@ pub struct NodeStats {
     /// Reports received from the physical ECU (absent when the ECU is simulated).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub physical_reports: Option<u64>,
+    /// Frames the kernel dropped from its socket's full receive queue (HIL; absent on
+    /// the memory bus, which cannot drop one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub queue_drops: Option<u32>,
 }
 
 /// What plays an actuator ECU in the run.
@@ -300,6 +305,11 @@ impl<B: Can> Station<B> {
         &self.report_times
     }
 
+    /// Its port on the bus.
+    pub fn port(&self) -> &CanPort<B> {
+        &self.port
+    }
+
     /// The node's CAN statistics.
     pub fn stats(&self) -> NodeStats {
         NodeStats {
@@ -316,6 +326,7 @@ impl<B: Can> Station<B> {
                 Twin::Simulated(_) => None,
                 Twin::Physical(r) => Some(r.reports),
             },
+            queue_drops: None,
         }
     }
 
@@ -353,12 +364,17 @@ pub struct StandaloneStatus {
 
 /// Run the simulated ECU `kind` alone on `port` (a stand-in for the hardware: it
 /// answers commands, watches the heartbeat and reports, as in a run) on `clock`,
-/// at the scenario's physics rate (`sections.sim`), until `stop`. `status` is called every
-/// `status_every` seconds. Returns the final status.
+/// at the scenario's physics rate (`sections.sim`), until `stop`. `horizon`, when
+/// the port reads through it ([`firmware_bridge::can::timed`]), is set at each tick's
+/// deadline, so ticks that catch up after a stall take the frames of their own
+/// periods, as in a HIL run. `status` is called every `status_every` seconds. Returns
+/// the final status.
+#[allow(clippy::too_many_arguments)]
 pub fn run_standalone<B: Can>(
     kind: EcuKind,
     sections: &EcuSections<'_>,
     port: CanPort<B>,
+    horizon: Option<&Horizon>,
     clock: &mut dyn Clock,
     stop: &AtomicBool,
     status_every: f64,
@@ -383,7 +399,10 @@ pub fn run_standalone<B: Can>(
     };
     let mut k = 0u64;
     while !stop.load(Ordering::Relaxed) {
-        clock.wait_tick(k);
+        let late = clock.wait_tick(k);
+        if let Some(h) = horizon {
+            h.set_for_tick(late);
+        }
         let now = k as f64 * dt;
         station.drain(now);
         station.step(now, dt);

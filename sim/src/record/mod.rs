@@ -174,6 +174,10 @@ pub struct RecordSummary {
     pub nmea_sentences: u64,
     pub laser_scans: u64,
     pub fixes: u64,
+    /// CAN frames the recorder's tap lost: the kernel dropped them from its full
+    /// receive queue (HIL; absent where it cannot happen or cannot be told).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub can_frames_lost: Option<u32>,
     /// The first error writing the recording (the run went on without it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -182,8 +186,12 @@ pub struct RecordSummary {
 /// A line for the log: what was recorded where.
 pub fn describe(s: &RecordSummary) -> String {
     format!(
-        "recorded {} CAN frames, {} NMEA sentences, {} laser scans in {}{}",
+        "recorded {} CAN frames{}, {} NMEA sentences, {} laser scans in {}{}",
         s.can_frames,
+        match s.can_frames_lost {
+            Some(n) if n > 0 => format!(" ({n} more lost by the tap's full queue)"),
+            _ => String::new(),
+        },
         s.nmea_sentences,
         s.laser_scans,
         s.dir.display(),
@@ -867,8 +875,9 @@ impl<T: BusTap> Recording<T> {
         self.recorder.maybe_flush();
     }
 
-    /// See [`Recorder::finish`].
-    pub fn finish(self) -> Option<RecordSummary> {
+    /// See [`Recorder::finish`]; the summary also says how many frames the tap lost.
+    pub fn finish(mut self) -> Option<RecordSummary> {
+        self.recorder.summary.can_frames_lost = self.tap.queue_drops();
         self.recorder.finish()
     }
 }

@@ -28,6 +28,12 @@ fn id_of(id: embedded_can::Id) -> (u32, bool) {
 /// Takes what arrived since the last call, never blocking.
 pub trait BusTap {
     fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()>;
+
+    /// Frames the tap never got: the kernel dropped them from its full receive queue
+    /// (`None`: it cannot tell, or cannot lose any).
+    fn queue_drops(&self) -> Option<u32> {
+        None
+    }
 }
 
 impl BusTap for firmware_bridge::can::membus::MemEndpoint {
@@ -53,10 +59,13 @@ pub struct SocketTap {
 }
 
 impl SocketTap {
+    /// Listen on `iface`, with a deep receive queue so that a stalled recorder loses
+    /// no frame ([`firmware_bridge::can::DEEP_QUEUE_BYTES`]).
     pub fn open(iface: &str) -> std::io::Result<SocketTap> {
         let socket = CanSocket::open(iface)?;
         socket.set_nonblocking(true)?;
         socket.set_recv_timestamp(true)?;
+        firmware_bridge::can::set_receive_queue(&socket, firmware_bridge::can::DEEP_QUEUE_BYTES)?;
         Ok(SocketTap { socket })
     }
 }
@@ -78,5 +87,9 @@ impl BusTap for SocketTap {
                 Err(e) => return Err(e),
             }
         }
+    }
+
+    fn queue_drops(&self) -> Option<u32> {
+        firmware_bridge::can::queue_drops(&self.socket)
     }
 }
