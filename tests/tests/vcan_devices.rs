@@ -112,8 +112,9 @@ fn passed(out: std::process::Output) -> Result<Value> {
     for node in ["steering_can", "throttle_can"] {
         ensure!(
             verdict[node]["e2e"]["bad_crc"] == 0 && verdict[node]["e2e"]["skipped_counter"] == 0,
-            "{node}: {}",
-            verdict[node]["e2e"]
+            "{node}: {} (frames the kernel dropped from its queue: {})",
+            verdict[node]["e2e"],
+            verdict[node]["queue_drops"]
         );
     }
     Ok(verdict)
