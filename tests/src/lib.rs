@@ -35,6 +35,17 @@ impl Drop for TestVcan {
 }
 
 /// Run a can-utils tool and return its output, naming the package when it is missing.
+/// Frames the kernel's per-CPU input backlog has dropped since boot, all CPUs
+/// (`/proc/net/softnet_stat`, second column, hex): where a frame that vcan loops back
+/// to local sockets is lost for every one of them when the softirqs that empty the
+/// backlog fall behind. `None` when the file cannot be read.
+pub fn softnet_drops() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/net/softnet_stat").ok()?;
+    text.lines()
+        .map(|l| u64::from_str_radix(l.split_whitespace().nth(1)?, 16).ok())
+        .sum()
+}
+
 pub fn can_utils(tool: &str, args: &[&str]) -> anyhow::Result<Output> {
     Command::new(tool).args(args).output().map_err(|e| {
         anyhow::anyhow!(

@@ -93,7 +93,15 @@ fn standalone_ecu(kind: &str, can: &str) -> Result<Background> {
 /// Run to the end and check the verdict: goal reached, no collision, every frame the
 /// simulator's ECUs received passed E2E.
 fn passes(mut cmd: Command) -> Result<Value> {
-    passed(cmd.output().context("running ugv-sim")?)
+    let before = ugv_e2e_tests::softnet_drops();
+    let out = cmd.output().context("running ugv-sim")?;
+    let after = ugv_e2e_tests::softnet_drops();
+    passed(out).with_context(|| {
+        format!(
+            "frames the kernel's input backlog dropped during the run: {:?}",
+            after.zip(before).map(|(a, b)| a.saturating_sub(b))
+        )
+    })
 }
 
 /// The verdict of a finished `ugv-sim run`, checked as in [`passes`].
