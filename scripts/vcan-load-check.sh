@@ -3,7 +3,8 @@
 # CPU hog (one busy loop per core, at ordinary priority), the vcan group run RUNS times
 # in a row inside one `vcan-setup vm` boot, as the README's test command runs it (two
 # retries per test, .config/nextest.toml). Per run: the tests passed at the first try,
-# passed on a retry (FLAKY), failed. Everything is left in results/vcan-load/.
+# passed on a retry (FLAKY), failed, and the frames the guest's input backlog dropped
+# (runs.txt). Everything is left in results/vcan-load/.
 #
 #   bash scripts/vcan-load-check.sh [RUNS] [HOST_NICE] [HOG]
 #
@@ -19,9 +20,16 @@ if [ "${1:-}" = --in-vm ]; then
     runs=$2
     for i in $(seq 1 "$runs"); do
         start=$(date +%s)
+        # Frames the guest's input backlog dropped (softnet_stat's second column, hex).
+        drops() {
+            local s=0 _ d _rest
+            while read -r _ d _rest; do s=$((s + 16#$d)); done </proc/net/softnet_stat
+            echo "$s"
+        }
+        before=$(drops)
         cargo nextest run --workspace --locked --no-fail-fast -E 'group(vcan)' \
             >"$out/run-$i.log" 2>&1 || true
-        echo "run $i: $(($(date +%s) - start)) s, $(grep -E '^ +Summary' "$out/run-$i.log" | tail -1)"
+        echo "run $i: $(($(date +%s) - start)) s, input backlog drops $(($(drops) - before)), $(grep -E '^ +Summary' "$out/run-$i.log" | tail -1)"
     done
     exit 0
 fi
