@@ -34,7 +34,6 @@ impl Drop for TestVcan {
     }
 }
 
-/// Run a can-utils tool and return its output, naming the package when it is missing.
 /// Frames the kernel's per-CPU input backlog has dropped since boot, all CPUs
 /// (`/proc/net/softnet_stat`, second column, hex): where a frame that vcan loops back
 /// to local sockets is lost for every one of them when the softirqs that empty the
@@ -46,6 +45,7 @@ pub fn softnet_drops() -> Option<u64> {
         .sum()
 }
 
+/// Run a can-utils tool and return its output, naming the package when it is missing.
 pub fn can_utils(tool: &str, args: &[&str]) -> anyhow::Result<Output> {
     Command::new(tool).args(args).output().map_err(|e| {
         anyhow::anyhow!(
