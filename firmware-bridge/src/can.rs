@@ -122,11 +122,6 @@ where
         &self.name
     }
 
-    /// The bus endpoint it wraps.
-    pub fn endpoint(&self) -> &B {
-        &self.bus
-    }
-
     /// Send a typed message, protected with the ID's next counter and the CRC.
     pub fn send<M: CanMessage>(&mut self, message: &M) -> Result<(), BridgeError> {
         let data = self
@@ -282,19 +277,27 @@ pub fn set_receive_queue(socket: &CanSocket, bytes: usize) -> nix::Result<()> {
     Ok(())
 }
 
-/// The kernel's count of frames dropped because `socket`'s receive queue was full
-/// (SO_MEMINFO), at any time.
-pub fn queue_drops(socket: &CanSocket) -> Option<u32> {
-    let mut buf = [0u8; 4 * (SK_MEMINFO_DROPS + 1)];
-    let n = socketcan::SocketOptions::get_socket_option_bytes(
-        socket,
-        libc::SOL_SOCKET,
-        SO_MEMINFO,
-        &mut buf,
-    )
-    .ok()?;
-    let at = 4 * SK_MEMINFO_DROPS;
-    (n >= at + 4).then(|| u32::from_ne_bytes([buf[at], buf[at + 1], buf[at + 2], buf[at + 3]]))
+/// A bus endpoint that tells how many frames it lost before it read them.
+pub trait QueueDrops {
+    /// The frames dropped because the receive queue was full, at any time (`None`: it
+    /// cannot tell, or cannot lose any).
+    fn queue_drops(&self) -> Option<u32>;
+}
+
+/// The kernel's count (SO_MEMINFO).
+impl QueueDrops for CanSocket {
+    fn queue_drops(&self) -> Option<u32> {
+        let mut buf = [0u8; 4 * (SK_MEMINFO_DROPS + 1)];
+        let n = socketcan::SocketOptions::get_socket_option_bytes(
+            self,
+            libc::SOL_SOCKET,
+            SO_MEMINFO,
+            &mut buf,
+        )
+        .ok()?;
+        let at = 4 * SK_MEMINFO_DROPS;
+        (n >= at + 4).then(|| u32::from_ne_bytes([buf[at], buf[at + 1], buf[at + 2], buf[at + 3]]))
+    }
 }
 
 /// Whether a frame with `id` passes an acceptance filter of standard IDs (`None`:
@@ -323,6 +326,13 @@ impl Filtered for CanSocket {
             .map(|&id| socketcan::CanFilter::new(u32::from(id), mask))
             .collect();
         socketcan::SocketOptions::set_filters(self, &filters)
+    }
+}
+
+impl<B: QueueDrops> CanPort<B> {
+    /// The frames its endpoint lost before it read them ([`QueueDrops`]).
+    pub fn queue_drops(&self) -> Option<u32> {
+        self.bus.queue_drops()
     }
 }
 

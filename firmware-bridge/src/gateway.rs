@@ -54,6 +54,8 @@ pub use stats::{DirectionStats, GatewayStats, LatencySummary, LocalCounts, Messa
 
 use log::ForwardLog;
 use socket::{GatewaySocket, ReadOutcome};
+
+use crate::can::QueueDrops;
 use stats::DirectionCounters;
 
 use crate::sync::lock;
@@ -439,8 +441,8 @@ fn forward(
     // pair refreshed every second: one clock read per frame less (clock reads cost
     // microseconds in an emulated VM, whose clock source is the HPET).
     let mut wall_base = wall_clock_base();
-    let kernel_drops = |c: &Mutex<DirectionCounters>| {
-        if let Some(d) = from.kernel_drops() {
+    let queue_drops = |c: &Mutex<DirectionCounters>| {
+        if let Some(d) = from.queue_drops() {
             lock(c).overflow_total(d);
         }
     };
@@ -449,7 +451,7 @@ fn forward(
             Ok(ReadOutcome::Frame(frame, drops)) => (frame, drops),
             Ok(ReadOutcome::Timeout) => {
                 // The bus is idle: the kernel's drop count, and the log on disk.
-                kernel_drops(counters);
+                queue_drops(counters);
                 if let Some(log) = &shared.log
                     && let Err(e) = lock(log).flush()
                 {
@@ -552,7 +554,7 @@ fn forward(
             Err(SendFailure::GaveUp(_)) => {}
         }
     }
-    kernel_drops(counters);
+    queue_drops(counters);
     Ok(())
 }
 

@@ -3,6 +3,7 @@
 //! SIL), and the verdict's bookkeeping.
 
 use embedded_can::nb::Can;
+use firmware_bridge::can::QueueDrops;
 use firmware_bridge::{BridgeError, CanPort};
 use golf_car_can::CanMessage;
 use serde::Serialize;
@@ -158,7 +159,7 @@ struct WindDown {
 /// Below this speed the car counts as stopped, m/s.
 const STOPPED: f64 = 0.05;
 
-impl<B: Can> Sim<B> {
+impl<B: Can + QueueDrops> Sim<B> {
     /// A run of `scenario` with the steering and throttle ECUs on their own bus endpoints.
     pub fn new(scenario: Scenario, steering: CanPort<B>, throttle: CanPort<B>) -> Sim<B> {
         let world = World::new(&scenario.obstacles);
@@ -391,11 +392,6 @@ impl<B: Can> Sim<B> {
         }
     }
 
-    /// The two ECUs' ports on the bus: steering, throttle.
-    pub fn ecu_ports(&self) -> (&CanPort<B>, &CanPort<B>) {
-        (self.steering.port(), self.throttle.port())
-    }
-
     /// CAN statistics of the two ECUs.
     pub fn node_stats(&self) -> (NodeStats, NodeStats) {
         (self.steering.stats(), self.throttle.stats())
@@ -453,7 +449,7 @@ pub struct RunReport {
     pub bus_load: BusLoadReport,
 }
 
-impl<B: Can> Sim<B> {
+impl<B: Can + QueueDrops> Sim<B> {
     /// The report of the run so far, ended by `outcome`.
     /// What the arbitration of a bus with the wire's time did (SIL with
     /// `can.bit_timing`), for the report's bus load.

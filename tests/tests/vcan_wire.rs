@@ -306,7 +306,7 @@ fn a_timed_socket_hands_out_only_the_frames_that_arrived_by_its_horizon() -> Res
 fn a_stalled_timed_socket_keeps_every_frame_of_a_burst_a_default_queue_drops_them() -> Result<()> {
     use embedded_can::nb::Can;
     use firmware_bridge::can::timed::{Horizon, TimedSocket};
-    use firmware_bridge::can::{queue_drops, set_receive_queue};
+    use firmware_bridge::can::{QueueDrops, set_receive_queue};
     use socketcan::{CanSocket, Socket};
 
     const BURST: usize = 3000;
@@ -348,7 +348,7 @@ fn a_stalled_timed_socket_keeps_every_frame_of_a_burst_a_default_queue_drops_the
     while shallow.read_frame().is_ok() {
         read += 1;
     }
-    let dropped = queue_drops(&shallow).context("SO_MEMINFO")?;
+    let dropped = shallow.queue_drops().context("SO_MEMINFO")?;
     ensure!(
         read < BURST / 2 && read + dropped as usize == BURST,
         "the default queue kept {read} and dropped {dropped} of {BURST}"

@@ -210,6 +210,13 @@ impl embedded_can::nb::Can for MemEndpoint {
     }
 }
 
+/// An inbox grows as needed: nothing is lost.
+impl super::QueueDrops for MemEndpoint {
+    fn queue_drops(&self) -> Option<u32> {
+        None
+    }
+}
+
 impl super::Filtered for MemEndpoint {
     fn set_acceptance(&self, ids: &[u16]) -> std::io::Result<()> {
         if let Some(inbox) = lock(&self.hub).inboxes.get_mut(self.index) {

@@ -17,8 +17,8 @@ use std::time::SystemTime;
 
 use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
 
-use super::Filtered;
 use super::paced::Pacer;
+use super::{Filtered, QueueDrops};
 use crate::clock::unix_ns;
 
 /// The time up to which the timed sockets sharing it hand out frames, set by the loop
@@ -88,12 +88,6 @@ impl TimedSocket {
         })
     }
 
-    /// The kernel's count of frames it dropped because this socket's receive queue was
-    /// full.
-    pub fn queue_drops(&self) -> Option<u32> {
-        super::queue_drops(&self.socket)
-    }
-
     /// Send through `pacer` from now on (see [`super::paced`]): a frame goes onto
     /// the interface when it wins the bus. The first socket paced by a pacer also
     /// reports the other nodes' frames to it, so the bus time they take is counted
@@ -128,6 +122,13 @@ impl TimedSocket {
             CanFrame::Error(e) => Err(nb::Error::Other(socketcan::Error::from(e.into_error()))),
             other => Ok(other),
         }
+    }
+}
+
+/// The kernel's count for its socket.
+impl QueueDrops for TimedSocket {
+    fn queue_drops(&self) -> Option<u32> {
+        self.socket.queue_drops()
     }
 }
 

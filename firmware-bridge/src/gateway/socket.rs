@@ -35,6 +35,7 @@ use nix::sys::time::TimeSpec;
 use socketcan::{CanSocket, Socket, SocketOptions};
 
 use super::GatewayError;
+use crate::can::QueueDrops;
 
 /// Size of the kernel's classic `struct can_frame`.
 pub const CAN_MTU: usize = 16;
@@ -204,12 +205,6 @@ impl GatewaySocket {
         socket::getsockopt(&self.socket, sockopt::RcvBuf).ok()
     }
 
-    /// The kernel's count of frames dropped because this socket's receive queue was
-    /// full (SO_MEMINFO), at any time (SO_RXQ_OVFL only tells with the next frame).
-    pub fn kernel_drops(&self) -> Option<u32> {
-        crate::can::queue_drops(&self.socket)
-    }
-
     /// A buffer for [`GatewaySocket::read`]'s control messages.
     pub fn cmsg_buffer(&self) -> Vec<u8> {
         vec![0; self.cmsg_len]
@@ -264,6 +259,14 @@ impl GatewaySocket {
             Ok(_) => Err(Errno::EMSGSIZE),
             Err(e) => Err(e),
         }
+    }
+}
+
+/// The kernel's count for its socket (SO_MEMINFO), at any time (SO_RXQ_OVFL only
+/// tells with the next frame).
+impl QueueDrops for GatewaySocket {
+    fn queue_drops(&self) -> Option<u32> {
+        self.socket.queue_drops()
     }
 }
 

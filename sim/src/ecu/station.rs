@@ -6,6 +6,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use embedded_can::nb::Can;
+use firmware_bridge::can::QueueDrops;
 use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::clock::Clock;
 use firmware_bridge::{BridgeError, CanPort, Received};
@@ -104,7 +105,7 @@ pub struct Station<B> {
     last_sent: HashMap<u16, Payload>,
 }
 
-impl<B: Can> Station<B> {
+impl<B: Can + QueueDrops> Station<B> {
     /// The ECU `kind` on `port`, simulated or physical as `device` says. The ECU takes
     /// only its node's messages (an ECU's acceptance filter: another node's stream is
     /// not its business, not even a gap in its counter); the port still sees, and
@@ -305,11 +306,6 @@ impl<B: Can> Station<B> {
         &self.report_times
     }
 
-    /// Its port on the bus.
-    pub fn port(&self) -> &CanPort<B> {
-        &self.port
-    }
-
     /// The node's CAN statistics.
     pub fn stats(&self) -> NodeStats {
         NodeStats {
@@ -326,7 +322,7 @@ impl<B: Can> Station<B> {
                 Twin::Simulated(_) => None,
                 Twin::Physical(r) => Some(r.reports),
             },
-            queue_drops: None,
+            queue_drops: self.port.queue_drops(),
         }
     }
 
@@ -370,7 +366,7 @@ pub struct StandaloneStatus {
 /// periods, as in a HIL run. `status` is called every `status_every` seconds. Returns
 /// the final status.
 #[allow(clippy::too_many_arguments)]
-pub fn run_standalone<B: Can>(
+pub fn run_standalone<B: Can + QueueDrops>(
     kind: EcuKind,
     sections: &EcuSections<'_>,
     port: CanPort<B>,

@@ -464,10 +464,7 @@ pub fn run_scenario(
             .and_then(|t| fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns));
         verdict.wires = Some(wires.stats());
     };
-    let mut report = sim.report(outcome.clone());
-    let (steering_port, throttle_port) = sim.ecu_ports();
-    report.steering_can.queue_drops = steering_port.endpoint().queue_drops();
-    report.throttle_can.queue_drops = throttle_port.endpoint().queue_drops();
+    let report = sim.report(outcome.clone());
     let end = RunEnd {
         mode: Mode::Hil,
         report,

@@ -6,6 +6,7 @@
 use std::time::SystemTime;
 
 use embedded_can::Frame;
+use firmware_bridge::can::QueueDrops;
 use socketcan::{CanSocket, EmbeddedFrame, Socket, SocketOptions};
 
 /// One frame as the tap saw it.
@@ -25,15 +26,10 @@ fn id_of(id: embedded_can::Id) -> (u32, bool) {
     }
 }
 
-/// Takes what arrived since the last call, never blocking.
-pub trait BusTap {
+/// Takes what arrived since the last call, never blocking; its queue drops are the
+/// frames the recording lacks.
+pub trait BusTap: QueueDrops {
     fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()>;
-
-    /// Frames the tap never got: the kernel dropped them from its full receive queue
-    /// (`None`: it cannot tell, or cannot lose any).
-    fn queue_drops(&self) -> Option<u32> {
-        None
-    }
 }
 
 impl BusTap for firmware_bridge::can::membus::MemEndpoint {
@@ -88,8 +84,10 @@ impl BusTap for SocketTap {
             }
         }
     }
+}
 
+impl QueueDrops for SocketTap {
     fn queue_drops(&self) -> Option<u32> {
-        firmware_bridge::can::queue_drops(&self.socket)
+        self.socket.queue_drops()
     }
 }
