@@ -88,7 +88,27 @@ def metrics(entry):
         "rms": c.get("tracking_error_rms"),
         "effort": c.get("steering_effort_deg_s"),
         "failures": v.get("failures", []),
+        "stop_reason": c.get("stop_reason"),
+        "reversals": c.get("reversals") or 0,
     }
+
+
+def failure_kind(m):
+    """What a failed run did, from its verdict's failures: collided, stopped short of
+    the goal, still moving at the time limit (in its recovery when it had reversed and
+    not yet given up), passed too close; else its first failure as written."""
+    f = m["failures"]
+    if any("collision" in x for x in f):
+        return "collided"
+    if any(x.startswith("not stopped at the end") for x in f):
+        if m["reversals"] > 0 and m["stop_reason"] is None:
+            return "still in its recovery (reversing and replanning) at the time limit"
+        return "still moving at the time limit"
+    if any(x.startswith("goal not reached") for x in f):
+        return "stopped short of the goal"
+    if any(x.startswith("clearance") for x in f):
+        return "passed closer than the scenario requires"
+    return f[0] if f else "failed"
 
 
 def wilson95(k, n):
@@ -121,21 +141,30 @@ def discussion(summary, rows):
     """The reading of the results; every figure quoted is computed here."""
     every = [m for ms in rows.values() for runs in ms.values() for m in runs]
     collisions = sum(1 for m in every if m and "collision" in m["failures"])
-    stops = sum(1 for m in every if m and not m["passed"] and "collision" not in m["failures"])
     nom = {f: summary[("nominal", f)] for f in FOLLOWERS}
+    gps = {f: summary[("gps-noise", f)] for f in FOLLOWERS}
     calmer = [
         c
         for c in CONDITIONS
         if (summary[(c, "anfis")]["effort"] or 0.0) < (summary[(c, "optimal")]["effort"] or 0.0)
     ]
     L = ["## Discussion", ""]
-    stops_text = (
-        f"{stops} failures are stops short of the goal (the planner found no feasible path "
-        "from where the disturbed car ended up and the car waited, or it judged the goal "
-        "reached from a noisy fix)"
-    )
+    kinds = {}
+    for ms in rows.values():
+        for runs in ms.values():
+            for m in runs:
+                if m and not m["passed"]:
+                    k = failure_kind(m)
+                    kinds[k] = kinds.get(k, 0) + 1
+    failed = sum(kinds.values())
+    what = "; ".join(f"{k}: {n}" for k, n in sorted(kinds.items(), key=lambda x: -x[1]))
     if collisions == 0:
-        L.append(f"- Safety held in every condition: no collision in any run; the {stops_text}.")
+        L.append(
+            f"- Safety held in every condition: no collision in any run. The {failed} failed "
+            f"runs, by what the car did: {what or 'none'}. A stop short of the goal is the "
+            "planner finding no feasible path from where the disturbed car ended up (or "
+            "judging the goal reached from a noisy fix), and the car waiting."
+        )
     else:
         hit = {}
         for ms in rows.values():
@@ -146,24 +175,30 @@ def discussion(summary, rows):
         where = ", ".join(f"{s} {n}" for s, n in sorted(hit.items(), key=lambda x: -x[1]))
         L.append(
             f"- Collisions: {collisions} of {len(every)} runs collided ({where}: runs over "
-            f"both followers and all conditions); the other {stops_text}. A seed sweep "
-            "finds what a single draw per scenario did not: these are open findings for "
-            "the navigation work, not noise."
+            f"both followers and all conditions). The {failed} failed runs, by what the "
+            f"car did: {what}. A seed sweep finds what a single draw per scenario did not: "
+            "these are open findings for the navigation work, not noise."
         )
     per = []
     for c in CONDITIONS:
         o, a = summary[(c, "optimal")], summary[(c, "anfis")]
         per.append(f"{c} {rate(o['passed'], o['total'])} / {rate(a['passed'], a['total'])}")
+    passed_both = lambda c: sum(summary[(c, f)]["passed"] for f in FOLLOWERS)
+    clean = [c for c in CONDITIONS if passed_both(c) == sum(summary[(c, f)]["total"] for f in FOLLOWERS)]
+    worst = min(CONDITIONS, key=passed_both)
+    worst_kinds = {}
+    for f in FOLLOWERS:
+        for runs in rows[(worst, f)].values():
+            for m in runs:
+                if m and not m["passed"]:
+                    k = failure_kind(m)
+                    worst_kinds[k] = worst_kinds.get(k, 0) + 1
     L.append(
-        "- Success, optimal law / ANFIS: " + ", ".join(per) + ". The steering dead time is "
-        "by far the worst disturbance for both: the feedback gains are tuned for a 0.02 s "
-        "actuator; with 0.25 s of delay the car lags every planned swerve, so "
-        "replannings start from headings and positions closer to obstacles, where the "
-        "steering-limited polynomial has no feasible a6 and the car stops. The speed-loop "
-        "lag costs only time (the speed profile is not tracked tightly outside moving "
-        "obstacles). White GPS noise of 8 cm is mostly a planning problem: each replanning "
-        "starts at a noisy pose, so narrow passages (narrow gap, corridor) become "
-        "intermittently infeasible."
+        "- Success, optimal law / ANFIS: " + ", ".join(per) + ". Every run of both "
+        f"followers passed in: {', '.join(clean) or 'no condition'}. The hardest condition "
+        f"is {worst}, where the failed runs (both followers) were "
+        + "; ".join(f"{k}: {n}" for k, n in sorted(worst_kinds.items(), key=lambda x: -x[1]))
+        + "."
     )
     L.append(
         "- Tracking RMS hardly moves between conditions (nominal "
@@ -173,10 +208,11 @@ def discussion(summary, rows):
         "GPS noise it is the noise itself: the error is measured with the noisy pose). The "
         "followers differ in how much they steer: ANFIS, a smooth fit of the optimal "
         "law's nominal behaviour, commands less steering rate in "
-        f"{len(calmer)} of {len(CONDITIONS)} conditions ({', '.join(calmer) or 'none'}), and "
-        "under GPS noise the optimal law's speed-scheduled feedback passes the position "
-        "noise straight to the steering (see the effort column) while ANFIS's bell "
-        "memberships flatten it."
+        f"{len(calmer)} of {len(CONDITIONS)} conditions ({', '.join(calmer) or 'none'}). "
+        "GPS noise reaches the steering through both: steering effort "
+        f"{fmt(gps['optimal']['effort'], 1)} deg/s optimal, {fmt(gps['anfis']['effort'], 1)} "
+        f"deg/s ANFIS, against {fmt(nom['optimal']['effort'], 1)} and "
+        f"{fmt(nom['anfis']['effort'], 1)} nominal."
     )
     apart = []
     for c in CONDITIONS:
@@ -196,9 +232,9 @@ def discussion(summary, rows):
     )
     L.append(
         "- Not covered: a replan-on-new-information configuration (needs controller "
-        "options in `ugv-sim suite`), and integral action against the steering bias "
-        "(neither follower has it; replanning hides most of the bias's lateral error, at "
-        "the cost of steering effort)."
+        "options in `ugv-sim suite`). The steering bias is removed by the controller's "
+        "online estimate for both followers alike, so this study does not show how "
+        "either would cope with it alone."
     )
     L.append("")
     return L
@@ -275,7 +311,14 @@ def report(out, figures):
     L.append(
         "The controller replans every 0.5 s from the car's current state, so a tracking "
         "error is wiped out at every replanning: in the nominal suite the lateral error "
-        "stays around a centimetre and the followers barely differ (both pass everything). "
+        f"stays at {1000 * summary[('nominal', 'optimal')]['rms']:.0f} mm RMS and the "
+        "followers barely differ (passed: "
+        + " and ".join(
+            f"{summary[('nominal', f)]['passed']} of {summary[('nominal', f)]['total']} "
+            f"runs with {name}"
+            for f, name in FOLLOWERS.items()
+        )
+        + "). "
         "A follower only shows when something pushes the car off its path within a "
         "replanning period, which is what real golf cars do. The disturbances are "
         "simulator-side, written into copies of the scenario files; the controller is "
