@@ -179,23 +179,30 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
         })
         .collect();
 
-    // The ECUs' reports are judged in the ECUs' own time, counted in report periods:
-    // a simulator that stalls catches up afterwards, sending the reports of its late
-    // ticks in a burst, so their receive times say nothing of when the ECU decided.
-    // Its ticks take in the commands by their kernel receive times, the ones candump
-    // shows, so those anchor the count.
+    // The ECUs' reports are judged in the ECUs' own time. A simulator that stalls
+    // catches up afterwards, sending its late ticks' reports in a burst, so a report's
+    // receive time is only a bound: never before it was due. While an ECU stays in one
+    // state its reports are periodic (it also reports at once on entering or leaving
+    // its enabled state), so within such a run report i is due at t0 + i periods, t0
+    // the tightest bound the reports sent on time give. The ticks take in the commands
+    // by their kernel receive times, the ones candump shows: one clock for both.
     let period = |spec: &golf_car_can::MessageSpec| -> Result<f64> {
         let ms = spec
             .cycle_time_ms
             .with_context(|| format!("{} has no cycle", spec.name))?;
         Ok(f64::from(ms) / 1000.0)
     };
+    let due_times = |received: &[f64], period: f64| -> Vec<f64> {
+        let t0 = received
+            .iter()
+            .enumerate()
+            .map(|(i, t)| t - i as f64 * period)
+            .fold(f64::INFINITY, f64::min);
+        (0..received.len())
+            .map(|i| t0 + i as f64 * period)
+            .collect()
+    };
     let steer_period = period(SteeringReport::spec())?;
-    let first_enable = frames
-        .iter()
-        .find(|(_, m)| matches!(m, GolfCarMessage::SteeringCmd(c) if c.enable))
-        .map(|(t, _)| *t)
-        .context("no enabling command seen")?;
 
     // While commanded: the angle rises to the target, never faster than the rate limit.
     let limit = ugv_sim_limit();
@@ -229,9 +236,9 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
     );
 
     // After the commands stop: both ECUs go to their safe state, with at most one
-    // report period beyond the command timeout still enabled. The ECU enabled with
-    // the first enabling command and kept every report period enabled until its safe
-    // report; the commands lasted last_cmd - first_enable of that.
+    // report period beyond the command timeout still enabled. Counted over the ECU's
+    // enabled run, from a report period after it enabled (its on-change report) to its
+    // safe report.
     for (name, spec, timeout, reports) in [
         (
             "steering",
@@ -239,7 +246,7 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
             SteeringCmd::spec().timeout_ms,
             steering
                 .iter()
-                .map(|(_, r)| (r.enabled, r.fault != SteeringReportFault::None))
+                .map(|(t, r)| (*t, r.enabled, r.fault != SteeringReportFault::None))
                 .collect::<Vec<_>>(),
         ),
         (
@@ -248,7 +255,7 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
             ThrottleCmd::spec().timeout_ms,
             throttle
                 .iter()
-                .map(|(_, r)| (r.enabled, r.fault != ThrottleReportFault::None))
+                .map(|(t, r)| (*t, r.enabled, r.fault != ThrottleReportFault::None))
                 .collect(),
         ),
     ] {
@@ -256,28 +263,39 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
         let timeout = f64::from(timeout.context("the DBC gives the command a timeout")?) / 1000.0;
         let enabled = reports
             .iter()
-            .position(|(enabled, _)| *enabled)
+            .position(|(_, enabled, _)| *enabled)
             .with_context(|| format!("{name} never enabled"))?;
         let safe = enabled
             + reports[enabled..]
                 .iter()
-                .position(|(enabled, fault)| !enabled && *fault)
+                .position(|(_, enabled, fault)| !enabled && *fault)
                 .with_context(|| format!("{name} never reported its safe state"))?;
+        let run = &reports[enabled + 2..safe];
         ensure!(
-            reports[enabled..safe].iter().all(|(enabled, _)| *enabled),
-            "{name} dropped out of enabled before its safe state"
+            run.len() > 10 && run.iter().all(|(_, enabled, _)| *enabled),
+            "{name}: not a steady enabled run before the safe state: {} reports",
+            run.len()
         );
-        let after_last = (safe - enabled) as f64 - (last_cmd - first_enable) / period;
-        let allowed = timeout / period + 1.0;
+        let received: Vec<f64> = run.iter().map(|(t, ..)| *t).collect();
+        let due = due_times(&received, period);
+        let still_enabled = due.iter().filter(|due| **due > last_cmd).count();
+        let allowed = (timeout / period).round() as usize + 1;
+        let last_due = due.last().copied().unwrap_or(last_cmd);
+        let late = received
+            .iter()
+            .zip(&due)
+            .map(|(r, d)| r - d)
+            .fold(0.0, f64::max);
         eprintln!(
-            "{name}: {after_last:.1} enabled reports after the last command ({allowed} allowed), \
-             the safe state {:.1} ms after it in the ECU's time",
-            after_last * period * 1000.0
+            "{name}: {still_enabled} enabled reports after the last command ({allowed} allowed), \
+             the safe state {:.1}-{:.1} ms after it; reports received up to {:.1} ms after due",
+            (last_due - last_cmd) * 1000.0,
+            (last_due + period - last_cmd) * 1000.0,
+            late * 1000.0
         );
-        // Half a period for where the last command fell within a report period.
         ensure!(
-            after_last <= allowed + 0.5,
-            "{name}: {after_last:.1} enabled reports after the last command, {allowed} allowed"
+            still_enabled <= allowed,
+            "{name}: {still_enabled} enabled reports after the last command, {allowed} allowed"
         );
     }
     let last_thr = throttle.last().context("no throttle reports")?.1;
