@@ -182,3 +182,58 @@ pub fn mcap_summary(path: &std::path::Path) -> anyhow::Result<serde_json::Value>
     );
     Ok(serde_json::from_slice(&out.stdout)?)
 }
+
+/// `ugv-sim replay` of the recording a finished HIL run left in `results` (run.mcap and
+/// verdict.json), checked as far as an open-loop replay of a HIL run can be: it reads
+/// the whole file, starts at the recorded controller's first frame, `start_s` seconds
+/// of simulated time (a controller the simulator starts comes after the simulator
+/// began recording; one on its own board before, as the simulator waits for its
+/// heartbeat), replays to the run's end, and replays and finds recorded more than 100
+/// of each of the controller's messages. Its agreement within the HIL tolerance is
+/// printed, not judged: a HIL recording made in the emulated VM replays within it only
+/// some of the time (README, "Replay"; the tolerance itself is tested on SIL
+/// recordings). Returns the replay's report.
+pub fn replay_hil_recording(
+    results: &std::path::Path,
+    start_s: std::ops::Range<f64>,
+) -> anyhow::Result<serde_json::Value> {
+    use anyhow::{Context, ensure};
+    let replay = Command::new(workspace_bin("ugv-sim")?)
+        .arg("replay")
+        .arg(results.join(ugv_sim::record::MCAP_FILE))
+        .output()?;
+    let text = String::from_utf8_lossy(&replay.stdout);
+    eprintln!(
+        "{}\n{text}",
+        String::from_utf8_lossy(&replay.stderr).trim_end()
+    );
+    ensure!(
+        matches!(replay.status.code(), Some(0 | 1)),
+        "the replay failed: {:?}",
+        replay.status
+    );
+    let report: serde_json::Value = serde_json::from_str(&text)?;
+    let verdict: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(results.join("verdict.json"))?)?;
+    let start = report["controller_start_s"]
+        .as_f64()
+        .context("controller_start_s")?;
+    let replayed = report["replayed_s"].as_f64().context("replayed_s")?;
+    let time = verdict["time"].as_f64().context("verdict time")?;
+    ensure!(
+        start_s.contains(&start),
+        "controller start {start} s, expected in {start_s:?}"
+    );
+    ensure!(
+        start + replayed > time - 0.5,
+        "replayed {start} + {replayed} s of a {time} s run"
+    );
+    for message in ["STEERING_CMD", "THROTTLE_CMD", "CONTROLLER_HEARTBEAT"] {
+        let m = &report["messages"][message];
+        ensure!(
+            m["recorded"].as_u64() > Some(100) && m["replayed"].as_u64() > Some(100),
+            "{message}: {m}"
+        );
+    }
+    Ok(report)
+}

@@ -13,8 +13,11 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, ensure};
+use golf_car_can::candump::parse_line;
 use serde_json::Value;
-use ugv_e2e_tests::{NullModem, TestVcan, workspace_bin};
+use ugv_e2e_tests::{NullModem, TestVcan, mcap_summary, replay_hil_recording, workspace_bin};
+use ugv_sim::hil::gateway_log;
+use ugv_sim::record::{MCAP_FILE, topics};
 
 /// A child process killed on drop (a standalone ECU, a controller on its "board").
 struct Background(Child);
@@ -49,28 +52,24 @@ impl Bench {
         self.dir.path().join("results")
     }
 
-    /// `ugv-sim run` of the paper's scenario on `sim_can` with this bench file. Not
-    /// recorded: in the emulated VM, the recorder's work on the tick thread beside a
-    /// gateway, a standalone ECU and the controller on two vCPUs delayed laser scans
-    /// past the controller's 250 ms laser watchdog at start-up (recording is tested on
-    /// its own, and the paper's HIL run records).
-    fn sim(&self, sim_can: &str, start_controller: bool) -> Result<Command> {
+    /// `ugv-sim run` of the paper's scenario on `sim_can` with this bench file,
+    /// recorded when `record` says. The runs with a standalone ECU are not: in the
+    /// emulated VM, the recorder's work on the tick thread beside a gateway, a
+    /// standalone ECU and the controller on two vCPUs delayed laser scans past the
+    /// controller's 250 ms laser watchdog at start-up.
+    fn sim(&self, sim_can: &str, start_controller: bool, record: bool) -> Result<Command> {
         let mut cmd = Command::new(workspace_bin("ugv-sim")?);
-        cmd.args([
-            "run",
-            "--no-record",
-            "--can",
-            sim_can,
-            "--run-id",
-            &self.run_id,
-        ])
-        .args(["--status-every", "5"])
-        .arg("--devices")
-        .arg(self.dir.path().join("bench.toml"))
-        .arg("--results")
-        .arg(self.results())
-        .arg("--gps-link")
-        .arg(self.dir.path().join("gps"));
+        cmd.args(["run", "--can", sim_can, "--run-id", &self.run_id])
+            .args(["--status-every", "5"]);
+        if !record {
+            cmd.arg("--no-record");
+        }
+        cmd.arg("--devices")
+            .arg(self.dir.path().join("bench.toml"))
+            .arg("--results")
+            .arg(self.results())
+            .arg("--gps-link")
+            .arg(self.dir.path().join("gps"));
         if start_controller {
             cmd.arg("--controller")
                 .arg(workspace_bin("ugv-controller")?);
@@ -147,7 +146,7 @@ fn physical_ecu_run(kind: &str, node: &str) -> Result<()> {
             phys_can.name
         ),
     )?;
-    let verdict = passes(bench.sim(&sim_can.name, true)?)?;
+    let verdict = passes(bench.sim(&sim_can.name, true, false)?)?;
     eprintln!("{}", serde_json::to_string_pretty(&verdict["wires"])?);
     let station = &verdict[node];
     // The vehicle moved by the physical ECU's reports; its simulated twin said nothing.
@@ -187,7 +186,7 @@ fn the_gps_on_a_serial_device_feeds_the_controller() -> Result<()> {
         ),
     )?;
     // The controller opens the far end of the cable (the peer), not a pty.
-    let verdict = passes(bench.sim(&sim_can.name, true)?)?;
+    let verdict = passes(bench.sim(&sim_can.name, true, false)?)?;
     let wires: Value = serde_json::from_str(&std::fs::read_to_string(
         bench.results().join("wires.json"),
     )?)?;
@@ -207,7 +206,7 @@ fn the_simulated_laser_served_over_cola_reaches_the_controller_through_the_drive
         "laser",
         "laser = { mode = \"cola\", listen = \"127.0.0.1:0\" }\n",
     )?;
-    let verdict = passes(bench.sim(&sim_can.name, true)?)?;
+    let verdict = passes(bench.sim(&sim_can.name, true, false)?)?;
     let driver = &verdict["wires"]["laser_driver"];
     ensure!(driver["frames"].as_u64().unwrap_or(0) > 100, "{driver}");
     // The controller saw the post through the CoLa-A path.
@@ -246,7 +245,9 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
             cable.a.display()
         ),
     )?;
-    let sim = bench.sim(&sim_can.name, false)?.spawn_output_thread()?;
+    let sim = bench
+        .sim(&sim_can.name, false, true)?
+        .spawn_output_thread()?;
     // The "board": the controller binary on the physical bus, its GPS on the cable's
     // far end, given the configuration the simulator wrote for it.
     let config = bench.results().join("controller.toml");
@@ -279,6 +280,36 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
         "gateway: {}",
         verdict["wires"]
     );
+    // The recording of a bench run with physical devices: the NMEA that went out on
+    // the serial line, the frames on the simulator's bus, and the gateway's log of the
+    // board's bus, which replays like any HIL recording.
+    let results = bench.results();
+    let summary = mcap_summary(&results.join(MCAP_FILE))?;
+    ensure!(summary["complete"] == true, "{summary}");
+    ensure!(
+        summary["topics"][topics::NMEA]["count"].as_u64() > Some(100),
+        "{summary}"
+    );
+    let log = std::fs::read_to_string(results.join(gateway_log(&board_can.name)))?;
+    let mut sides = [0u64; 2];
+    for line in log.lines() {
+        let frame = parse_line(line).with_context(|| format!("gateway log line {line:?}"))?;
+        let iface = frame.interface.as_deref();
+        sides[usize::from(iface == Some(board_can.name.as_str()))] += 1;
+    }
+    // Each forwarded frame is logged on both buses, as received and as sent; the
+    // verdict counted them while the board's controller still sent.
+    let total = forwarded(&verdict, "to_sim") + forwarded(&verdict, "to_physical");
+    ensure!(
+        sides[0] == sides[1] && sides[0] >= total,
+        "gateway log: {} lines on {}, {} on {}; {total} frames forwarded",
+        sides[0],
+        sim_can.name,
+        sides[1],
+        board_can.name
+    );
+    // The simulator started its clock once the board's heartbeat came (up to 60 s).
+    replay_hil_recording(&results, -60.0..0.0)?;
     Ok(())
 }
 

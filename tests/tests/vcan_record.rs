@@ -13,7 +13,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, ensure};
 use golf_car_can::candump::{Compact, parse_line};
 use ugv_controller::config::FollowerKind;
-use ugv_e2e_tests::{TestVcan, can_utils, mcap_summary, workspace_bin};
+use ugv_e2e_tests::{TestVcan, can_utils, mcap_summary, replay_hil_recording, workspace_bin};
 use ugv_sim::Scenario;
 use ugv_sim::mission::controller_config;
 use ugv_sim::record::{BUS_LOG, MCAP_FILE, topics};
@@ -133,44 +133,7 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
         "{s}"
     );
     // The replay: the controller library fed the recording from the moment the
-    // recorded controller started, to the end. Its agreement with the recorded
-    // commands is printed, not judged: open-loop, a HIL recording made in the emulated
-    // VM replays within the stated tolerance only some of the time (README, "Replay";
-    // the tolerance itself is tested in tests/tests/record.rs).
-    let replay = Command::new(workspace_bin("ugv-sim")?)
-        .arg("replay")
-        .arg(results.join(MCAP_FILE))
-        .output()?;
-    let text = String::from_utf8_lossy(&replay.stdout);
-    eprintln!(
-        "{}\n{text}",
-        String::from_utf8_lossy(&replay.stderr).trim_end()
-    );
-    ensure!(
-        matches!(replay.status.code(), Some(0 | 1)),
-        "the replay failed: {:?}",
-        replay.status
-    );
-    let report: serde_json::Value = serde_json::from_str(&text)?;
-    let verdict: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(results.join("verdict.json"))?)?;
-    let start = report["controller_start_s"]
-        .as_f64()
-        .context("controller_start_s")?;
-    let replayed = report["replayed_s"].as_f64().context("replayed_s")?;
-    let time = verdict["time"].as_f64().context("verdict time")?;
-    // The controller process starts after the simulator began recording.
-    ensure!(start > 0.0 && start < 10.0, "controller start {start} s");
-    ensure!(
-        start + replayed > time - 0.5,
-        "replayed {start} + {replayed} s of a {time} s run"
-    );
-    for message in ["STEERING_CMD", "THROTTLE_CMD", "CONTROLLER_HEARTBEAT"] {
-        let m = &report["messages"][message];
-        ensure!(
-            m["recorded"].as_u64() > Some(100) && m["replayed"].as_u64() > Some(100),
-            "{message}: {m}"
-        );
-    }
+    // recorded controller started (its process, after the simulator's), to the end.
+    replay_hil_recording(&results, 0.0..10.0)?;
     Ok(())
 }

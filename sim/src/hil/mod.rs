@@ -25,7 +25,7 @@ use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
 pub use process::{ControllerProcess, spawn_controller, wait_for_controller};
-pub use wires::{WireMap, Wires};
+pub use wires::{WireMap, Wires, gateway_log};
 
 use crate::devices::gps::GpsError;
 use crate::devices::map::{ControllerSite, GpsOutput};
@@ -185,7 +185,8 @@ impl Endpoints {
         let gps_link = options.gps_link.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id))
         });
-        let wires = Wires::open(sc, &gps_link, &options.run_id, horizon)?;
+        let gateway_logs = options.record.then_some(options.results.as_path());
+        let wires = Wires::open(sc, &gps_link, &options.run_id, horizon, gateway_logs)?;
         Ok(Endpoints {
             steering,
             throttle,

@@ -65,16 +65,26 @@ impl std::fmt::Debug for Wires {
     }
 }
 
+/// The file name of the log a run's gateway to `physical` keeps in the results: each
+/// frame it forwarded as received and as sent, with the kernel's times, as candump
+/// would log the physical bus (see [`firmware_bridge::gateway`]'s log).
+pub fn gateway_log(physical: &str) -> String {
+    format!("gateway-{physical}.log")
+}
+
 impl Wires {
     /// Open the wires of the scenario's device map: the GPS pty behind `gps_link` (or
     /// the serial device), the laser service of `run_id` (directly, or behind a CoLa-A
     /// server and driver), and a gateway to each physical bus. `can_horizon` is the
-    /// horizon of the ECUs' timed sockets, which the run sets at each tick.
+    /// horizon of the ECUs' timed sockets, which the run sets at each tick. With
+    /// `gateway_logs` (a recorded run's results), each gateway logs the frames it
+    /// forwards there, in `candump -l -x` form ([`gateway_log`]).
     pub fn open(
         sc: &Scenario,
         gps_link: &Path,
         run_id: &str,
         can_horizon: Horizon,
+        gateway_logs: Option<&Path>,
     ) -> Result<Wires, HilError> {
         let devices = &sc.devices;
         let (gps, gps_line) = match &devices.gps {
@@ -145,6 +155,7 @@ impl Wires {
                 sim_iface: sc.can.interface.clone(),
                 physical_iface: physical.clone(),
                 physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
+                log: gateway_logs.map(|dir| dir.join(gateway_log(physical))),
                 ..GatewayConfig::default()
             };
             gateways.push(Gateway::spawn(config).map_err(|source| HilError::Gateway {

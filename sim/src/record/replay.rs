@@ -469,8 +469,10 @@ impl Comparer<'_> {
             .map_or_else(|| format!("{id:#x}"), |m| m.name.to_string())
     }
 
+    /// Simulated seconds of log time `ns`: negative before the simulator's clock
+    /// started (a controller on its own board sends while the simulator waits for it).
     fn time(&self, ns: u64) -> f64 {
-        ns.saturating_sub(self.epoch_ns) as f64 * 1e-9
+        (i128::from(ns) - i128::from(self.epoch_ns)) as f64 * 1e-9
     }
 
     fn diverge(&mut self, d: Divergence) {
