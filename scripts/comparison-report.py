@@ -111,6 +111,23 @@ def failure_kind(m):
     return f[0] if f else "failed"
 
 
+def failure_kinds(tables):
+    """How many failed runs of each kind (failure_kind) the tables hold, each table a
+    scenario -> runs mapping of rows."""
+    kinds = {}
+    for ms in tables:
+        for runs in ms.values():
+            for m in runs:
+                if m and not m["passed"]:
+                    k = failure_kind(m)
+                    kinds[k] = kinds.get(k, 0) + 1
+    return kinds
+
+
+def kinds_text(kinds):
+    return "; ".join(f"{k}: {n}" for k, n in sorted(kinds.items(), key=lambda x: -x[1]))
+
+
 def wilson95(k, n):
     """The 95 % Wilson score interval of k successes in n (the formula of ugv-sim's
     summaries, sim/src/sweep/stats.rs), pooled here over a condition's scenarios."""
@@ -149,15 +166,9 @@ def discussion(summary, rows):
         if (summary[(c, "anfis")]["effort"] or 0.0) < (summary[(c, "optimal")]["effort"] or 0.0)
     ]
     L = ["## Discussion", ""]
-    kinds = {}
-    for ms in rows.values():
-        for runs in ms.values():
-            for m in runs:
-                if m and not m["passed"]:
-                    k = failure_kind(m)
-                    kinds[k] = kinds.get(k, 0) + 1
+    kinds = failure_kinds(rows.values())
     failed = sum(kinds.values())
-    what = "; ".join(f"{k}: {n}" for k, n in sorted(kinds.items(), key=lambda x: -x[1]))
+    what = kinds_text(kinds)
     if collisions == 0:
         L.append(
             f"- Safety held in every condition: no collision in any run. The {failed} failed "
@@ -186,18 +197,11 @@ def discussion(summary, rows):
     passed_both = lambda c: sum(summary[(c, f)]["passed"] for f in FOLLOWERS)
     clean = [c for c in CONDITIONS if passed_both(c) == sum(summary[(c, f)]["total"] for f in FOLLOWERS)]
     worst = min(CONDITIONS, key=passed_both)
-    worst_kinds = {}
-    for f in FOLLOWERS:
-        for runs in rows[(worst, f)].values():
-            for m in runs:
-                if m and not m["passed"]:
-                    k = failure_kind(m)
-                    worst_kinds[k] = worst_kinds.get(k, 0) + 1
     L.append(
         "- Success, optimal law / ANFIS: " + ", ".join(per) + ". Every run of both "
         f"followers passed in: {', '.join(clean) or 'no condition'}. The hardest condition "
         f"is {worst}, where the failed runs (both followers) were "
-        + "; ".join(f"{k}: {n}" for k, n in sorted(worst_kinds.items(), key=lambda x: -x[1]))
+        + kinds_text(failure_kinds(rows[(worst, f)] for f in FOLLOWERS))
         + "."
     )
     L.append(

@@ -16,6 +16,8 @@ use golf_car_can::{
     ThrottleReport, ThrottleReportFault,
 };
 use ugv_e2e_tests::{TestVcan, workspace_bin};
+use ugv_sim::ecu::{period_of, safety_timing};
+use ugv_sim::scenario::CanConfig;
 
 const TARGET_DEG: f64 = 20.0;
 const COMMAND_SECONDS: f64 = 2.0;
@@ -186,12 +188,6 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
     // its enabled state), so within such a run report i is due at t0 + i periods, t0
     // the tightest bound the reports sent on time give. The ticks take in the commands
     // by their kernel receive times, the ones candump shows: one clock for both.
-    let period = |spec: &golf_car_can::MessageSpec| -> Result<f64> {
-        let ms = spec
-            .cycle_time_ms
-            .with_context(|| format!("{} has no cycle", spec.name))?;
-        Ok(f64::from(ms) / 1000.0)
-    };
     let due_times = |received: &[f64], period: f64| -> Vec<f64> {
         let t0 = received
             .iter()
@@ -202,7 +198,7 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
             .map(|i| t0 + i as f64 * period)
             .collect()
     };
-    let steer_period = period(SteeringReport::spec())?;
+    let steer_period = period_of::<SteeringReport>();
 
     // While commanded: the angle rises to the target, never faster than the rate limit.
     let limit = ugv_sim_limit();
@@ -239,11 +235,11 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
     // report period beyond the command timeout still enabled. Counted over the ECU's
     // enabled run, from a report period after it enabled (its on-change report) to its
     // safe report.
-    for (name, spec, timeout, reports) in [
+    for (name, period, timeout, reports) in [
         (
             "steering",
-            SteeringReport::spec(),
-            SteeringCmd::spec().timeout_ms,
+            period_of::<SteeringReport>(),
+            safety_timing(&CanConfig::default(), SteeringCmd::ID).command_timeout,
             steering
                 .iter()
                 .map(|(t, r)| (*t, r.enabled, r.fault != SteeringReportFault::None))
@@ -251,16 +247,14 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
         ),
         (
             "throttle",
-            ThrottleReport::spec(),
-            ThrottleCmd::spec().timeout_ms,
+            period_of::<ThrottleReport>(),
+            safety_timing(&CanConfig::default(), ThrottleCmd::ID).command_timeout,
             throttle
                 .iter()
                 .map(|(t, r)| (*t, r.enabled, r.fault != ThrottleReportFault::None))
                 .collect(),
         ),
     ] {
-        let period = period(spec)?;
-        let timeout = f64::from(timeout.context("the DBC gives the command a timeout")?) / 1000.0;
         let enabled = reports
             .iter()
             .position(|(_, enabled, _)| *enabled)
