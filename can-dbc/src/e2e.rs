@@ -45,6 +45,21 @@ pub enum E2eError {
     },
 }
 
+impl E2eError {
+    /// The standard ID of the rejected frame (`None` for an extended one).
+    pub fn id(&self) -> Option<u16> {
+        match *self {
+            E2eError::UnknownId { extended: true, .. } => None,
+            E2eError::UnknownId { id, .. } => u16::try_from(id).ok(),
+            E2eError::RemoteFrame { id }
+            | E2eError::WrongDlc { id, .. }
+            | E2eError::BadCrc { id, .. }
+            | E2eError::RepeatedCounter { id, .. }
+            | E2eError::SkippedCounter { id, .. } => Some(id),
+        }
+    }
+}
+
 /// CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, xor-out 0xFF.
 pub fn crc8_sae_j1850(bytes: &[u8]) -> u8 {
     let mut crc: u8 = 0xFF;

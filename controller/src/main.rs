@@ -26,7 +26,7 @@ use firmware_bridge::laser::LaserSubscriber;
 use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
-use ugv_controller::core::{COMMAND_PERIOD, Controller};
+use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
 use ugv_controller::runtime::Runtime;
 use ugv_controller::trace::TraceWriter;
 
@@ -270,11 +270,27 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     let mut clock = WallClock::new(COMMAND_PERIOD);
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();
+    let clear = if tty { "\r\x1b[2K" } else { "" };
+    // Every change of mode or stop reason is logged as it happens, status lines or
+    // not: the log of a controller on its own board says when and why it stopped.
+    let mut logged: Option<(Mode, Option<String>)> = None;
     let exit = rt.run(&mut clock, &stop, |k, now, rt| {
+        let ctl = rt.controller();
+        if logged.as_ref().is_none_or(|(mode, reason)| {
+            mode != ctl.mode() || reason.as_deref() != ctl.stop_reason()
+        }) {
+            eprintln!(
+                "{clear}ugv-controller: t={now:7.2}s {:?}{}",
+                ctl.mode(),
+                ctl.stop_reason()
+                    .map(|r| format!(", stopped: {r}"))
+                    .unwrap_or_default()
+            );
+            logged = Some((ctl.mode().clone(), ctl.stop_reason().map(str::to_owned)));
+        }
         if status_ticks == 0 || k % status_ticks != 0 {
             return;
         }
-        let ctl = rt.controller();
         let line = match ctl.pose(now) {
             Some(p) => format!(
                 "t={now:7.2}s {:?} x={:7.2} y={:7.2} hdg={:6.1}° v={:4.2} obstacles={} {}",

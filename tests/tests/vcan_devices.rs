@@ -119,12 +119,40 @@ fn passed(out: std::process::Output) -> Result<Value> {
     for node in ["steering_can", "throttle_can"] {
         ensure!(
             verdict[node]["e2e"]["bad_crc"] == 0 && verdict[node]["e2e"]["skipped_counter"] == 0,
-            "{node}: {} (frames the kernel dropped from its queue: {})",
+            "{node}: {} (frames the kernel dropped from its queue: {}; the first rejected: {}); \
+             the gateways' losses: {}",
             verdict[node]["e2e"],
-            verdict[node]["queue_drops"]
+            verdict[node]["queue_drops"],
+            verdict[node]["first_rejections"],
+            gateway_losses(&verdict)
         );
     }
     Ok(verdict)
+}
+
+/// Where a gateway of the run can lose frames, per direction: its receive queue's
+/// overflow, its receive errors and the frames it gave up sending.
+fn gateway_losses(verdict: &Value) -> String {
+    let mut out = Vec::new();
+    for g in verdict["wires"]["gateways"]
+        .as_array()
+        .into_iter()
+        .flatten()
+    {
+        for dir in ["to_physical", "to_sim"] {
+            let d = &g[dir];
+            out.push(format!(
+                "{} -> {}: received {}, forwarded {}, rx_overflow {}, rx_errors {}, tx_dropped {}, tx_retries {}",
+                d["from"], d["to"], d["received"], d["forwarded"], d["rx_overflow"],
+                d["rx_errors"], d["tx_dropped"], d["tx_retries"]
+            ));
+        }
+    }
+    if out.is_empty() {
+        "no gateway".into()
+    } else {
+        out.join("; ")
+    }
 }
 
 /// The one gateway's forwarded count of message `name` in direction `dir`
@@ -257,6 +285,9 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
     )?)?;
     let baud = wires["gps_baud"].as_u64().context("gps_baud")?.to_string();
     let laser = wires["laser_service"].as_str().context("laser_service")?;
+    // Its log (each change of mode, with the reason of a stop) goes to a file, shown
+    // when the run fails.
+    let board_log = bench.dir.path().join("board.log");
     let _board = Background(
         Command::new(workspace_bin("ugv-controller")?)
             .arg("run")
@@ -268,13 +299,19 @@ fn the_controller_on_its_own_board_reaches_the_goal_through_the_gateway() -> Res
             .args(["--can", &board_can.name, "--status-every", "0"])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&board_log)?)
             .spawn()
             .context("starting the controller on its board")?,
     );
     let out = sim
         .join()
         .map_err(|_| anyhow::anyhow!("ugv-sim thread"))??;
-    let verdict = passed(out)?;
+    let verdict = passed(out).with_context(|| {
+        format!(
+            "the board controller's log:\n{}",
+            std::fs::read_to_string(&board_log).unwrap_or_else(|e| e.to_string())
+        )
+    })?;
     ensure!(
         forwarded(&verdict, "to_sim") > 1000 && forwarded(&verdict, "to_physical") > 1000,
         "gateway: {}",

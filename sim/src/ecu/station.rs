@@ -37,7 +37,15 @@ pub struct NodeStats {
     /// the memory bus, which cannot drop one).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub queue_drops: Option<u32>,
+    /// The first [`REJECTIONS_KEPT`] frames E2E rejected, each with the simulated time
+    /// it was read and why (which stream, which counters): what a skipped counter in
+    /// a failed bench run lost.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub first_rejections: Vec<String>,
 }
+
+/// The rejected frames a station describes in its statistics.
+pub const REJECTIONS_KEPT: usize = 8;
 
 /// What plays an actuator ECU in the run.
 #[derive(Debug)]
@@ -79,6 +87,16 @@ impl Reported {
     }
 }
 
+/// One rejected frame for [`NodeStats::first_rejections`]: when, the message's name
+/// when the DBC has its ID, and the E2E check's finding.
+fn describe_rejection(now: f64, e: &golf_car_can::E2eError) -> String {
+    let name = e
+        .id()
+        .and_then(|id| golf_car_can::NETWORK.message(id))
+        .map_or("?", |m| &m.name);
+    format!("t={now:.3} s {name}: {e}")
+}
+
 /// An actuator ECU and its connection to the simulator's bus.
 #[derive(Debug)]
 pub struct Station<B> {
@@ -101,6 +119,8 @@ pub struct Station<B> {
     /// Frames received from the bus (any, accepted or not), and raw frames sent.
     received: u64,
     raw_sent: u64,
+    /// The first rejected frames described ([`NodeStats::first_rejections`]).
+    first_rejections: Vec<String>,
     /// The last payload sent per ID (an injected repeated counter sends it again).
     last_sent: HashMap<u16, Payload>,
 }
@@ -134,6 +154,7 @@ impl<B: Can + QueueDrops> Station<B> {
             last_sent: HashMap::new(),
             received: 0,
             raw_sent: 0,
+            first_rejections: Vec::new(),
         }
     }
 
@@ -155,12 +176,16 @@ impl<B: Can + QueueDrops> Station<B> {
             if !matches!(r, Received::BusError(_)) {
                 self.received += 1;
             }
-            if let Received::Message(m) = r {
-                match rx(&m) {
+            match r {
+                Received::Message(m) => match rx(&m) {
                     RxFault::Pass => self.handle(now, &m),
                     RxFault::Drop => {}
                     RxFault::Delay(d) => self.delayed_rx.push_back((now + d, m)),
+                },
+                Received::Rejected(e) if self.first_rejections.len() < REJECTIONS_KEPT => {
+                    self.first_rejections.push(describe_rejection(now, &e));
                 }
+                _ => {}
             }
         }
         if let (Twin::Simulated(node), Some(id)) = (&mut self.twin, self.port.second_sender()) {
@@ -323,6 +348,7 @@ impl<B: Can + QueueDrops> Station<B> {
                 Twin::Physical(r) => Some(r.reports),
             },
             queue_drops: self.port.queue_drops(),
+            first_rejections: self.first_rejections.clone(),
         }
     }
 
@@ -557,5 +583,27 @@ mod tests {
         assert_eq!(stats.e2e.second_sender, 0, "{stats:?}");
         assert!(stats.e2e.skipped_counter > 100, "{stats:?}");
         assert!(b.fault_reports().is_empty());
+    }
+
+    #[test]
+    fn the_first_rejected_frames_are_described_with_their_stream_and_counters() {
+        let mut b = Bench::new();
+        // Commands at steps 0, 2, 4, ...; the one at step 10 (counter 5) is lost.
+        for k in 0..40u64 {
+            b.step(k != 10, false);
+        }
+        let stats = b.station.stats();
+        assert_eq!(stats.e2e.skipped_counter, 1, "{stats:?}");
+        assert_eq!(
+            stats.first_rejections,
+            ["t=0.060 s STEERING_CMD: CAN ID 0x100: counter skipped from 4 to 6 (expected 5)"]
+        );
+        // Only the first few are kept.
+        for k in 40..4000u64 {
+            b.step(k % 20 != 0, false);
+        }
+        let stats = b.station.stats();
+        assert!(stats.e2e.skipped_counter > 100, "{stats:?}");
+        assert_eq!(stats.first_rejections.len(), REJECTIONS_KEPT);
     }
 }
