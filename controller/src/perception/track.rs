@@ -145,6 +145,12 @@ impl Life {
         let window = self.scans.min(cfg.birth_window).max(1);
         f64::from(self.window_hits(cfg)) / f64::from(window)
     }
+
+    /// Seen often enough for the local map to keep what goes out of sight of it
+    /// (a local map there is: `memory_radius` above zero).
+    fn memorable(&self, cfg: &PerceptionConfig) -> bool {
+        cfg.memory_radius > 0.0 && self.confirmed && self.hits >= cfg.memory_min_hits
+    }
 }
 
 const H: Matrix2x4<f64> = Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
@@ -161,6 +167,8 @@ struct PointTrack {
     life: Life,
     /// Since when the velocity has been significant on every scan.
     moving_since: Option<f64>,
+    /// The position as of the last scan that measured it.
+    measured: [f64; 2],
 }
 
 impl PointTrack {
@@ -191,6 +199,7 @@ impl PointTrack {
             kind: m.kind,
             life: Life::new(stamp, cfg),
             moving_since: None,
+            measured: m.centre,
         };
         let r = track.measurement_covariance(m, cfg);
         track.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
@@ -243,6 +252,7 @@ impl PointTrack {
             self.state += k * y;
             self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         }
+        self.measured = [self.state[0], self.state[1]];
         let use_radius = match (self.kind, m.kind) {
             (_, ObstacleKind::Post) => {
                 self.kind = ObstacleKind::Post;
@@ -429,6 +439,80 @@ impl WallTrack {
     fn reported_velocity(&self, stamp: f64, cfg: &PerceptionConfig) -> [f64; 2] {
         confirmed_velocity(self.moving_since, self.velocity, stamp, cfg)
     }
+
+    /// A static wall the local map keeps, out of sight wholly or in part.
+    fn memorable(&self, stamp: f64, cfg: &PerceptionConfig) -> bool {
+        self.life.memorable(cfg) && self.reported_velocity(stamp, cfg) == [0.0, 0.0]
+    }
+}
+
+/// A wall's remembered end is kept only this near the new segment's line, metres:
+/// farther, the wall bends there (or the fit turned), and the new line would carry
+/// the end off the wall.
+const EXTENT_MAX_OFFSET: f64 = 0.5;
+/// Beyond a measured end, the stretch not looked at for being in view (but for the
+/// remembered end itself), metres: the beams just past an end the scan did see.
+const EXTENT_END_SLACK: f64 = 0.5;
+/// Spacing of the points checked for being out of view, metres.
+const EXTENT_STEP: f64 = 0.25;
+
+/// The segment `new` measured on a static wall, lengthened along its line over what
+/// the wall's previous extent `old` covered beyond its ends and this scan could not
+/// see (`sees`, [`super::detect::View::sees`]: out of the field of view, beyond the
+/// range, hidden behind something nearer). So a hedge the car drives along keeps the
+/// stretch behind the scanner, and the car does not turn (or back) into what it
+/// passed. An end the scan could see stays where it was measured: a union of every
+/// measured extent would grow outwards with each noisy end, and closed a gate under
+/// GPS noise.
+fn keep_unseen_extent(
+    old: &SegmentMeasurement,
+    new: &SegmentMeasurement,
+    sees: &impl Fn(f64, f64, f64) -> bool,
+) -> SegmentMeasurement {
+    let Some(u) = direction(new) else {
+        return *new;
+    };
+    let len = new.length();
+    let rel = |p: [f64; 2]| [p[0] - new.p0[0], p[1] - new.p0[1]];
+    let along = |p: [f64; 2]| rel(p)[0] * u[0] + rel(p)[1] * u[1];
+    let across = |p: [f64; 2]| (-rel(p)[0] * u[1] + rel(p)[1] * u[0]).abs();
+    let at = |t: f64| [new.p0[0] + t * u[0], new.p0[1] + t * u[1]];
+    let r = new.half_thickness.max(0.0);
+    // No point from `from` to `to` along the line is in view.
+    let unseen = |from: f64, to: f64| {
+        let n = ((to - from).abs() / EXTENT_STEP).ceil().clamp(1.0, 1e4) as usize;
+        (0..=n).all(|i| {
+            let p = at(from + (to - from) * i as f64 / n as f64);
+            !sees(p[0], p[1], r)
+        })
+    };
+    // The old end at `t`, beyond the measured end at `end`, is out of view, and so is
+    // all between, but for the slack.
+    let out_of_view = |end: f64, t: f64| {
+        let from = if (t - end).abs() > EXTENT_END_SLACK {
+            end + EXTENT_END_SLACK * (t - end).signum()
+        } else {
+            t
+        };
+        unseen(from, t)
+    };
+    let (mut t0, mut t1) = (0.0f64, len);
+    for p in [old.p0, old.p1] {
+        if across(p) > EXTENT_MAX_OFFSET {
+            continue;
+        }
+        let t = along(p);
+        if t < 0.0 && out_of_view(0.0, t) {
+            t0 = t0.min(t);
+        } else if t > len && out_of_view(len, t) {
+            t1 = t1.max(t);
+        }
+    }
+    SegmentMeasurement {
+        p0: if t0 < 0.0 { at(t0) } else { new.p0 },
+        p1: if t1 > len { at(t1) } else { new.p1 },
+        ..*new
+    }
 }
 
 /// The velocity of a rigid object from the normal speeds of two or more faces: the
@@ -603,9 +687,7 @@ impl Perception {
         // remembered, not missed, while within `memory_radius`.
         let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
-            cfg.memory_radius > 0.0
-                && life.confirmed
-                && life.hits >= cfg.memory_min_hits
+            life.memorable(cfg)
                 && !moving
                 && (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius
                 && !sees(x, y, r)
@@ -664,7 +746,12 @@ impl Perception {
             if let Some(wi) = w
                 && let Some(wall) = self.walls.get_mut(*wi)
             {
+                let before = wall.segment;
+                let static_map = wall.memorable(stamp, cfg);
                 wall.associate(s, stamp);
+                if static_map {
+                    wall.segment = keep_unseen_extent(&before, &wall.segment, &sees);
+                }
                 wall.life.record(true, cfg);
                 if let Some(u) = updated.get_mut(*wi) {
                     *u = true;
@@ -722,12 +809,7 @@ impl Perception {
             distance_to_segment([pose.x, pose.y], s.p0, s.p1) <= cfg.memory_radius
         };
         for (w, u) in self.walls.iter_mut().zip(&updated) {
-            let kept = cfg.memory_radius > 0.0
-                && w.life.confirmed
-                && w.life.hits >= cfg.memory_min_hits
-                && w.reported_velocity(stamp, cfg) == [0.0, 0.0]
-                && near(&w.segment)
-                && !wall_seen(&w.segment);
+            let kept = w.memorable(stamp, cfg) && near(&w.segment) && !wall_seen(&w.segment);
             if !u && !kept {
                 w.life.record(false, cfg);
             }
@@ -775,13 +857,19 @@ impl Perception {
             if filtered && !t.life.confirmed {
                 continue;
             }
-            let (x, y) = (t.state[0], t.state[1]);
+            let (mut x, mut y) = (t.state[0], t.state[1]);
             let mut velocity = t.reported_velocity(stamp, cfg);
             if static_walls
                 .iter()
                 .any(|w| slides_along(w, [x, y], t.radius, velocity))
             {
                 velocity = [0.0, 0.0];
+            }
+            // Missed, and not moving: where it was last measured. Coasting on a
+            // velocity estimate below the dead band (or not yet confirmed) carried a
+            // wall's end into the gate beside it at 1 m/s.
+            if t.life.misses > 0 && velocity == [0.0, 0.0] {
+                [x, y] = t.measured;
             }
             let [vx, vy] = velocity;
             if !within_radius(x, y, t.radius, reach([vx, vy], cfg)) {
@@ -1023,5 +1111,44 @@ mod tests {
         assert!(!slides_along(&fence, [18.0, -6.0], 0.3, [0.0, 1.0]));
         // Moving along it, but a metre off its line: an object.
         assert!(!slides_along(&fence, [21.0, -6.0], 0.2, [0.0, 1.0]));
+    }
+
+    #[test]
+    fn a_wall_keeps_only_the_stretch_that_went_out_of_view() {
+        // A hedge along y = 0 from x = 0 to 20, remembered whole; now only x >= 12 is
+        // measured, the scanner seeing nothing below x = 11.6 (behind it).
+        let old = seg([0.0, 0.0], [20.0, 0.0]);
+        let new = seg([12.0, 0.05], [20.0, 0.05]);
+        let behind = |x: f64, _: f64, _: f64| x > 11.6;
+        let kept = keep_unseen_extent(&old, &new, &behind);
+        assert!(dist(kept.p0, [0.0, 0.05]) < 1e-9, "{kept:?}");
+        assert_eq!(kept.p1, new.p1);
+        // Measured the other way round (p0 the far end): the same stretch kept.
+        let reversed = seg([20.0, 0.05], [12.0, 0.05]);
+        let kept = keep_unseen_extent(&old, &reversed, &behind);
+        assert_eq!(kept.p0, reversed.p0);
+        assert!(dist(kept.p1, [0.0, 0.05]) < 1e-9, "{kept:?}");
+        // A stretch in view between (a gap in the hedge the scan looks through): the
+        // wall is not there, so nothing beyond it is kept.
+        let gap = |x: f64, _: f64, _: f64| x > 11.6 || (3.0..4.0).contains(&x);
+        assert_eq!(keep_unseen_extent(&old, &new, &gap), new);
+        // Ends in view stay as measured: no growth from one noisy end to the next.
+        let everywhere = |_: f64, _: f64, _: f64| true;
+        let fence = seg([5.0, 0.0], [8.2, 0.0]);
+        let shorter = seg([5.1, 0.0], [8.0, 0.02]);
+        assert_eq!(keep_unseen_extent(&fence, &shorter, &everywhere), shorter);
+        // An end off the new line (a bend) is not carried onto it.
+        let bent = seg([0.0, 2.0], [20.0, 0.0]);
+        assert_eq!(keep_unseen_extent(&bent, &new, &behind).p0, new.p0);
+        // An end just past the measured one, out of view: kept (the field of view's
+        // edge sweeping along the hedge a few centimetres a scan); in view: not.
+        let just = seg([11.5, 0.0], [20.0, 0.0]);
+        assert!(dist(keep_unseen_extent(&just, &new, &behind).p0, [11.5, 0.05]) < 1e-9);
+        let edge = |x: f64, _: f64, _: f64| x > 11.4;
+        assert_eq!(keep_unseen_extent(&just, &new, &edge), new);
+    }
+
+    fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+        (a[0] - b[0]).hypot(a[1] - b[1])
     }
 }
