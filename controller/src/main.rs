@@ -271,22 +271,27 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();
     let clear = if tty { "\r\x1b[2K" } else { "" };
-    // Every change of mode or stop reason is logged as it happens, status lines or
-    // not: the log of a controller on its own board says when and why it stopped.
-    let mut logged: Option<(Mode, Option<String>)> = None;
+    // Every change of mode, and of stopping or moving on, is logged as it happens,
+    // status lines or not: the log of a controller on its own board says when and why
+    // it stopped. A stop reason whose wording changes (a distance in it) is logged
+    // again at most once a second.
+    let mut logged: Option<(Mode, Option<String>, f64)> = None;
     let exit = rt.run(&mut clock, &stop, |k, now, rt| {
         let ctl = rt.controller();
-        if logged.as_ref().is_none_or(|(mode, reason)| {
-            mode != ctl.mode() || reason.as_deref() != ctl.stop_reason()
+        let reason = ctl.stop_reason();
+        if logged.as_ref().is_none_or(|(mode, was, at)| {
+            mode != ctl.mode()
+                || was.is_some() != reason.is_some()
+                || (was.as_deref() != reason && now - at >= 1.0)
         }) {
             eprintln!(
                 "{clear}ugv-controller: t={now:7.2}s {:?}{}",
                 ctl.mode(),
-                ctl.stop_reason()
+                reason
                     .map(|r| format!(", stopped: {r}"))
                     .unwrap_or_default()
             );
-            logged = Some((ctl.mode().clone(), ctl.stop_reason().map(str::to_owned)));
+            logged = Some((ctl.mode().clone(), reason.map(str::to_owned), now));
         }
         if status_ticks == 0 || k % status_ticks != 0 {
             return;
