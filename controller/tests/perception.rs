@@ -135,6 +135,25 @@ mod perception {
         }
     }
 
+    impl Scanner {
+        /// One scan of `world` from the laser at `mount` on the vehicle at `pose`,
+        /// stamped `t`, given to `p`: what it tracks then.
+        #[allow(clippy::expect_used)]
+        fn track(
+            &self,
+            p: &mut Perception,
+            world: &[Shape],
+            pose: &Pose2,
+            mount: &Pose2,
+            t: f64,
+            rng: &mut Rng,
+        ) -> PerceptionOutput {
+            let ranges = self.ranges(world, pose, mount, rng, SIGMA);
+            p.update(&self.scan(t, &ranges), mount, pose)
+                .expect("valid")
+        }
+    }
+
     fn default_mount() -> Pose2 {
         Pose2::new(2.0, 0.0, 0.0)
     }
@@ -615,10 +634,7 @@ mod perception {
                 let t = k as f64 / RATE;
                 let pose = Pose2::new(2.0 * t, 0.0, 0.0);
                 let cart = box_sides([14.0 - 1.5 * t, offset], 2.4, 1.2);
-                let ranges = LMS111.ranges(&cart, &pose, &mount, &mut rng, SIGMA);
-                let out = p
-                    .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                    .expect("valid");
+                let out = LMS111.track(&mut p, &cart, &pose, &mount, t, &mut rng);
                 let pieces = posts(&out.obstacles, ObstacleKind::WallPiece);
                 if k >= 60 {
                     assert!(!pieces.is_empty(), "{label} k {k}: {:?}", out.obstacles);
@@ -664,10 +680,7 @@ mod perception {
             // Driving at 3 m/s along a gentle arc.
             let theta = 0.1 * t;
             let pose = Pose2::new(3.0 * t, 0.15 * t * t, theta);
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
             if k < 10 {
                 continue;
             }
@@ -807,10 +820,7 @@ mod perception {
         }];
         let mut k = 0;
         for _ in 0..10 {
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(k as f64 / RATE, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, k as f64 / RATE, &mut rng);
             k += 1;
             if k < cfg.birth_hits as usize {
                 assert!(
@@ -849,10 +859,7 @@ mod perception {
         for k in 0..=1300 {
             let t = k as f64 / RATE;
             let pose = Pose2::new((2.0 * t).min(12.0), 0.0, 0.0);
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
             if k >= 20 {
                 let o = out
                     .obstacles
@@ -888,10 +895,7 @@ mod perception {
         for k in 0..=500 {
             let t = k as f64 / RATE;
             let pose = Pose2::new(-3.0 + 2.0 * t, 0.0, 0.0);
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
             if k < 25 {
                 continue;
             }
@@ -938,10 +942,7 @@ mod perception {
         for k in 0..=800 {
             let t = k as f64 / RATE;
             let pose = Pose2::new(2.0 + 1.0 * t, 0.05, 0.0);
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
             for o in out.obstacles.iter().filter(|o| (o.x - 20.0).abs() < 1.0) {
                 let open = o.y.abs() - o.radius;
                 worst = worst.min(open);
@@ -1253,10 +1254,7 @@ mod perception {
                     r: 0.4,
                 },
             ];
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = p
-                .update(&LMS111.scan(t, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
             if k < 20 {
                 assert!(
                     out.obstacles.is_empty(),
@@ -1282,10 +1280,14 @@ mod perception {
             r: 0.35,
         }];
         for k in 0..10 {
-            let ranges = LMS111.ranges(&world, &pose, &mount, &mut rng, SIGMA);
-            let out = narrow
-                .update(&LMS111.scan(k as f64 / RATE, &ranges), &mount, &pose)
-                .expect("valid");
+            let out = LMS111.track(
+                &mut narrow,
+                &world,
+                &pose,
+                &mount,
+                k as f64 / RATE,
+                &mut rng,
+            );
             assert!(out.obstacles.is_empty());
         }
     }

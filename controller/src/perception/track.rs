@@ -473,9 +473,6 @@ fn keep_unseen_extent(
         return *new;
     };
     let len = new.length();
-    let rel = |p: [f64; 2]| [p[0] - new.p0[0], p[1] - new.p0[1]];
-    let along = |p: [f64; 2]| rel(p)[0] * u[0] + rel(p)[1] * u[1];
-    let across = |p: [f64; 2]| (-rel(p)[0] * u[1] + rel(p)[1] * u[0]).abs();
     let at = |t: f64| [new.p0[0] + t * u[0], new.p0[1] + t * u[1]];
     let r = new.half_thickness.max(0.0);
     // No point from `from` to `to` along the line is in view.
@@ -498,10 +495,10 @@ fn keep_unseen_extent(
     };
     let (mut t0, mut t1) = (0.0f64, len);
     for p in [old.p0, old.p1] {
-        if across(p) > EXTENT_MAX_OFFSET {
+        let (t, across) = line_coords(new.p0, u, p);
+        if across.abs() > EXTENT_MAX_OFFSET {
             continue;
         }
-        let t = along(p);
         if t < 0.0 && out_of_view(0.0, t) {
             t0 = t0.min(t);
         } else if t > len && out_of_view(len, t) {
@@ -964,6 +961,13 @@ fn direction(s: &SegmentMeasurement) -> Option<[f64; 2]> {
     (len > 0.0).then(|| [(s.p1[0] - s.p0[0]) / len, (s.p1[1] - s.p0[1]) / len])
 }
 
+/// Where `p` lies in the frame of the line through `origin` along unit `u`: how far
+/// along it, and how far to its left (negative: to its right).
+fn line_coords(origin: [f64; 2], u: [f64; 2], p: [f64; 2]) -> (f64, f64) {
+    let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
+    (dx * u[0] + dy * u[1], -dx * u[1] + dy * u[0])
+}
+
 /// A point track this near a static wall's line (beyond the two's radii), moving along
 /// it, is the wall's end (or a piece of it between gaps) sliding along as more or less
 /// of the wall comes into view past an occluder, not an object: it is reported
@@ -984,7 +988,7 @@ fn slides_along(wall: &SegmentMeasurement, p: [f64; 2], radius: f64, velocity: [
         return false;
     };
     let along = (velocity[0] * u[0] + velocity[1] * u[1]).abs() / speed;
-    let across = (-(p[0] - wall.p0[0]) * u[1] + (p[1] - wall.p0[1]) * u[0]).abs();
+    let across = line_coords(wall.p0, u, p).1.abs();
     along >= SLIDING_EDGE_MIN_COS && across <= wall.half_thickness + radius + SLIDING_EDGE_GAP
 }
 
@@ -997,9 +1001,10 @@ fn slides_along(wall: &SegmentMeasurement, p: [f64; 2], radius: f64, velocity: [
 fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f64> {
     let u = direction(old)?;
     let len = old.length();
-    let along = |p: [f64; 2]| (p[0] - old.p0[0]) * u[0] + (p[1] - old.p0[1]) * u[1];
-    let across = |p: [f64; 2]| -(p[0] - old.p0[0]) * u[1] + (p[1] - old.p0[1]) * u[0];
-    let (a0, a1) = (along(new.p0), along(new.p1));
+    let (a0, a1) = (
+        line_coords(old.p0, u, new.p0).0,
+        line_coords(old.p0, u, new.p1).0,
+    );
     let lo = a0.min(a1).max(0.0);
     let hi = a0.max(a1).min(len);
     if hi <= lo {
@@ -1016,7 +1021,7 @@ fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f
         new.p0[0] + t * (new.p1[0] - new.p0[0]),
         new.p0[1] + t * (new.p1[1] - new.p0[1]),
     ];
-    Some(across(q))
+    Some(line_coords(old.p0, u, q).1)
 }
 
 fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
