@@ -267,6 +267,11 @@ pub struct SafetyConfig {
     pub gps_timeout_s: Option<f64>,
     pub laser_timeout_s: f64,
     pub report_timeout_s: f64,
+    /// Before enabling the ECUs, every input (fix with heading, scan, both reports)
+    /// must have been fresh this long without a break, and the first replanning
+    /// done: start-up transients (processes still starting, a stalled bus, the first
+    /// planning) pass while the ECUs are disabled, not as an estop; seconds, 0-10.
+    pub settle_s: f64,
     /// Accept RTK float (true) or only RTK fixed (false).
     pub accept_rtk_float: bool,
 }
@@ -278,6 +283,7 @@ impl Default for SafetyConfig {
             gps_timeout_s: None,
             laser_timeout_s: 0.25,
             report_timeout_s: 0.25,
+            settle_s: 0.5,
             accept_rtk_float: true,
         }
     }
@@ -605,6 +611,7 @@ impl ControllerConfig {
         }
         positive_up_to(&at("laser_timeout_s"), s.laser_timeout_s, 10.0, "s")?;
         positive_up_to(&at("report_timeout_s"), s.report_timeout_s, 10.0, "s")?;
+        within(&at("settle_s"), s.settle_s, 0.0, 10.0, "s")?;
 
         self.perception.validate().map_err(|e| match e {
             crate::perception::PerceptionError::InvalidConfig { field, message } => {

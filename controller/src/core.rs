@@ -67,7 +67,8 @@ pub fn scan_of(frame: &firmware_bridge::laser::LaserFrame, stamp: f64) -> Scan<'
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "mode", rename_all = "snake_case")]
 pub enum Mode {
-    /// Heartbeat idle until GPS (with heading), laser and both ECUs are there.
+    /// Heartbeat idle until GPS (with heading), laser and both ECUs have been there
+    /// for `safety.settle_s` without a break and the first path is planned.
     WaitingForSensors,
     /// Heartbeat auto, the enable edge sent, waiting for both ECUs to report enabled.
     Enabling { since: f64 },
@@ -145,6 +146,8 @@ pub struct Controller {
     throttle: Option<(f64, ThrottleReport)>,
     ecu_fault: Option<String>,
     last_scan: Option<f64>,
+    /// Since when every input has been fresh without a break, while waiting for them.
+    ready_since: Option<f64>,
     /// The ECUs' reports against the commands (a stuck actuator, a driver's hands).
     monitor: crate::monitor::ActuatorMonitor,
     obstacles: Vec<Circle>,
@@ -182,6 +185,7 @@ impl Controller {
             throttle: None,
             ecu_fault: None,
             last_scan: None,
+            ready_since: None,
             monitor: Default::default(),
             obstacles: Vec::new(),
             stop_reason: None,
@@ -516,11 +520,17 @@ impl Controller {
         let limit = v.max_steer_deg.min(45.0);
         // Mode transitions.
         match self.mode.clone() {
-            Mode::WaitingForSensors => {
-                if self.safety_check(now).is_ok() && self.loc.heading_known() {
-                    self.mode = Mode::Enabling { since: now };
+            Mode::WaitingForSensors => match self.loc.predict(now) {
+                Some(pose) if self.safety_check(now).is_ok() && self.loc.heading_known() => {
+                    // The first path is planned while the ECUs are still disabled.
+                    self.plan(now, &pose);
+                    let since = *self.ready_since.get_or_insert(now);
+                    if now - since >= self.cfg.safety.settle_s && self.nav.planned(&pose) {
+                        self.mode = Mode::Enabling { since: now };
+                    }
                 }
-            }
+                _ => self.ready_since = None,
+            },
             Mode::Enabling { since } => {
                 if let Err((code, reason)) = self.safety_check(now) {
                     self.estop(code, reason);

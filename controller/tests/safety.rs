@@ -231,6 +231,45 @@ fn waits_for_sensors_then_enables_with_an_edge_and_drives() {
 }
 
 #[test]
+fn start_up_gaps_pass_while_disabled_and_the_first_path_is_planned_before_enabling() {
+    let mut rig = Rig::new();
+    let settle = rig.cfg.safety.settle_s;
+    assert!(settle >= 0.3, "{settle}");
+    rig.run(0.0, 0.2, ALL);
+    // A stall at start-up: the reports stop for longer than their timeout.
+    rig.run(
+        0.2,
+        0.7,
+        Feed {
+            reports: false,
+            ..ALL
+        },
+    );
+    assert_eq!(rig.ctl.mode(), &Mode::WaitingForSensors, "no estop yet");
+    // Steady again from 0.7 s: still waiting until the inputs have been steady for
+    // settle_s, with the first path already planned.
+    rig.run(0.7, 0.7 + settle - 0.02, ALL);
+    assert_eq!(rig.ctl.mode(), &Mode::WaitingForSensors);
+    assert!(!rig.ctl.nav.plans.is_empty(), "planned while waiting");
+    rig.run(0.7 + settle - 0.02, 0.7 + settle + 0.03, ALL);
+    assert!(
+        matches!(rig.ctl.mode(), Mode::Enabling { .. } | Mode::Auto),
+        "{:?}",
+        rig.ctl.mode()
+    );
+    rig.run(0.7 + settle + 0.03, 0.7 + settle + 0.5, ALL);
+    assert_eq!(rig.ctl.mode(), &Mode::Auto);
+    // No fault was reported while the reports were missing.
+    assert!(
+        !rig.out
+            .iter()
+            .any(|m| matches!(m, GolfCarMessage::FaultReport(_))),
+        "no fault reported"
+    );
+    rig.assert_limits();
+}
+
+#[test]
 fn a_car_in_a_dead_end_commands_gear_reverse_and_stays_in_auto() {
     let mut rig = Rig::new();
     // Returns 3 m from the laser over the whole front half: a cup round the nose.

@@ -12,6 +12,8 @@ use crate::planner::{Obstacle, Trajectory};
 const START_SLACK: f64 = 0.05;
 /// Step along x between the poses a path is checked at, metres.
 const PATH_STEP: f64 = 0.1;
+/// Step along a moving obstacle's track between the places it is checked at, metres.
+const TRACK_STEP: f64 = 0.05;
 
 /// The rectangle the car occupies, in the vehicle frame (x forward from the rear axle).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,6 +46,45 @@ impl Footprint {
             .iter()
             .filter(|o| o.vx == 0.0 && o.vy == 0.0)
             .all(|o| self.distance(x, y, heading, o.x, o.y) > o.radius + self.margin)
+    }
+
+    /// Whether the car at (x, y, heading) clears the moving obstacle `o` by the margin
+    /// wherever its constant-velocity track takes it from `from` to `to` seconds after
+    /// the instant its position is of (every [`TRACK_STEP`] along the track).
+    pub fn clear_of_track(
+        &self,
+        (x, y, heading): (f64, f64, f64),
+        o: &Obstacle,
+        from: f64,
+        to: f64,
+    ) -> bool {
+        let travel = o.vx.hypot(o.vy) * (to - from);
+        let n = (travel / TRACK_STEP).ceil().clamp(1.0, 4096.0) as usize;
+        (0..=n).all(|j| {
+            let s = from + (to - from) * j as f64 / n as f64;
+            self.distance(x, y, heading, o.x + o.vx * s, o.y + o.vy * s) > o.radius + self.margin
+        })
+    }
+
+    /// Whether the car, driving the trajectory's path at its pace (dx/dt) from the
+    /// instant the obstacles' positions are of, clears every moving obstacle by the
+    /// margin at every pose (every `PATH_STEP` of x), each swept over +- `margin_s`
+    /// along its velocity around the instant the car is there.
+    pub fn path_clear_of_moving(&self, t: &Trajectory, moving: &[Obstacle], margin_s: f64) -> bool {
+        let p = t.path();
+        let pace = t.w1();
+        if pace <= 0.0 {
+            return false;
+        }
+        let n = (p.span().abs() / PATH_STEP).ceil().max(1.0) as usize;
+        (0..=n).all(|j| {
+            let x = p.x_k() + p.span() * j as f64 / n as f64;
+            let at = (x - p.x_k()) / pace;
+            let pose = (x, p.y(x), p.heading(x));
+            moving
+                .iter()
+                .all(|o| self.clear_of_track(pose, o, at - margin_s, at + margin_s))
+        })
     }
 
     /// The static obstacles as the path check sees them from the car at (x, y,

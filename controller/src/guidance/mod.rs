@@ -171,6 +171,8 @@ pub struct Navigator {
     /// Turning towards the goal on this road-wheel angle before planning, radians.
     aligning: Option<f64>,
     next_replan: f64,
+    /// A replanning has finished.
+    planned: bool,
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
     planner_error: Option<ReplanError>,
@@ -207,6 +209,7 @@ impl Navigator {
             goal_blocked: false,
             aligning: None,
             next_replan: 0.0,
+            planned: false,
             infeasible_since: None,
             planner_error: None,
             reversing: None,
@@ -533,6 +536,13 @@ impl Navigator {
             && self.route.length() - self.progress_at(pose) > self.cfg.planner.final_approach
     }
 
+    /// Guidance has what it needs to drive from `pose`: a replanning has finished (with
+    /// a path or without), or none is needed (within the final approach).
+    pub fn planned(&self, pose: &Pose) -> bool {
+        self.planned
+            || self.route.length() - self.progress_at(pose) <= self.cfg.planner.final_approach
+    }
+
     /// A replanning was issued at `now`: the next is due one T_s later.
     pub fn issued(&mut self, now: f64) {
         self.next_replan = now + self.cfg.planner.replan_period_s;
@@ -542,6 +552,7 @@ impl Navigator {
     /// while the car reverses (on a planning thread) was planned from where it stood,
     /// and is dropped.
     pub fn accept(&mut self, outcome: PlanOutcome) {
+        self.planned = true;
         if self.reversing.is_some() {
             return;
         }
@@ -1092,6 +1103,63 @@ mod tests {
             Guidance::Drive { speed, .. } => assert!(speed < cfg.planner.cruise_speed),
             other => panic!("expected to drive, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn a_walker_converging_from_beside_is_driven_away_from_not_waited_for() {
+        // Suite scenario crossing, seed index 1, at the replanning that found nothing:
+        // a walker level with the car, 3.9 m to its right, walking towards its line.
+        // Every pace's circle-clear path is refused, and braking would leave the car
+        // standing where the walker arrives in 4 s.
+        let cfg = east_to(17.0);
+        let nav = Navigator::new(&cfg).expect("navigator");
+        let pose = car_at(0.0, 0.3, 0.0, 2.0);
+        let walker = |vx: f64, vy: f64| Circle {
+            x: -0.6,
+            y: -3.6,
+            radius: 0.5,
+            vx,
+            vy,
+        };
+        // Only the local goal is offered (in the run its detours were refused too).
+        let request = |obstacles: &[Circle]| {
+            let mut req = nav.request(0.0, &pose, obstacles);
+            req.detours.clear();
+            req.passages.clear();
+            req
+        };
+        let converging = walker(0.34, 0.78);
+        let outcome = solve(&request(&[converging]));
+        let (trajectory, record) = outcome.result.expect("planned");
+        let t = trajectory.expect("a way out");
+        assert!(record.escape && record.moving, "{record:?}");
+        // Driven at its pace, the car's rectangle stays clear of the walker's track,
+        // with the margins, at every pose.
+        let walker_now = planner::Obstacle {
+            x: -0.6,
+            y: -3.6,
+            radius: 0.5 + cfg.planner.moving_margin,
+            vx: 0.34,
+            vy: 0.78,
+        };
+        let fp = nav.footprint();
+        assert!(fp.path_clear_of_moving(&t, &[walker_now], 0.0));
+        assert!(record.pace.expect("pace") >= 0.5 * cfg.planner.cruise_speed);
+        // Where braking from 2 m/s at 1 m/s^2 leaves the car (2 m on), the walker
+        // arrives within the watch.
+        assert!(!fp.clear_of_track((2.0, 0.3, 0.0), &walker_now, 0.0, 5.0));
+        // A walker crossing just ahead passes in front of where the car would stand:
+        // standing is yielding, and no escape is planned (the circle-clear tiers slow
+        // the car instead).
+        let ahead = Circle {
+            x: 6.0,
+            y: -1.0,
+            ..walker(0.0, 1.0)
+        };
+        let req = request(&[ahead]);
+        assert!(super::solver::escape(&req, req.pacing.as_ref().expect("pacing")).is_none());
+        let (trajectory, record) = solve(&req).result.expect("planned");
+        assert!(trajectory.is_some() && !record.escape, "{record:?}");
     }
 
     #[test]

@@ -80,7 +80,8 @@ const FOLLOW_GAP: f64 = 1.0;
 const FOLLOW_GAIN: f64 = 0.3;
 
 /// What the moving obstacles near the line do (planning frame, the car at (px, py),
-/// `r0` its circle with margin): the nearest going the car's way, with the pace to
+/// `r0` its circle with margin): the nearest going the car's way (ahead of it, and
+/// more along the line than across it), with the pace to
 /// follow it at (its speed along the line, plus [`FOLLOW_GAIN`] times the headway
 /// error, so the pace changes with the gap instead of flipping between fixed fractions
 /// above and below the leader's speed), and whether one comes towards the car.
@@ -96,7 +97,7 @@ pub fn traffic(
         if !near_line(o, px, py, r0) {
             continue;
         }
-        if o.vx > TRAFFIC_MIN_SPEED {
+        if o.vx > TRAFFIC_MIN_SPEED && o.vx >= o.vy.abs() && o.x > px {
             let gap = (o.x - px).hypot(o.y - py) - o.radius - r0;
             if leader.is_none_or(|l| gap < l.0) {
                 leader = Some((gap, o));
@@ -248,6 +249,17 @@ mod tests {
         );
         assert_eq!(
             traffic(&[walker(-5.0, 0.0, 0.7)], 0.0, 0.0, r0),
+            (None, false)
+        );
+        // Crossing more than going along (steeper than 45 degrees), or level with the
+        // car beside it (its centre not ahead): no leader to pace behind.
+        let steep = planner::Obstacle {
+            vy: 0.8,
+            ..walker(10.0, 0.0, 0.34)
+        };
+        assert_eq!(traffic(&[steep], 0.0, 0.0, r0), (None, false));
+        assert_eq!(
+            traffic(&[walker(-0.1, -3.5, 0.7)], 0.0, 0.0, r0),
             (None, false)
         );
         // Standing still is no traffic.

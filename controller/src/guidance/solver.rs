@@ -44,6 +44,11 @@ pub struct PlanRecord {
     /// A detour passing slower traffic ([`Pass`]).
     #[serde(default)]
     pub passing: bool,
+    /// No path was feasible, and braking would have left the car standing in a moving
+    /// obstacle's track: a path among the static obstacles whose rectangle clears every
+    /// moving one in space-time, driven at its pace ([`escape`]).
+    #[serde(default)]
+    pub escape: bool,
 }
 
 /// Passing slower traffic going the car's way: problems towards local goals on a lane
@@ -172,8 +177,78 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
             return outcome;
         }
     }
+    if let Some(pacing) = &req.pacing
+        && let Some(outcome) = escape(req, pacing)
+    {
+        return outcome;
+    }
     nominal
 }
+
+/// How long a car braked to a stand watches a moving obstacle's track, seconds:
+/// standing where one comes within this is no yielding.
+const STOP_WATCH_S: f64 = 5.0;
+
+/// With no path feasible around moving obstacles the car brakes to a stand, yielding.
+/// Where a moving obstacle's constant-velocity track crosses the place it would stand
+/// (braking straight on at the pacing's deceleration, the car's rectangle grown by the
+/// passage margin, within [`STOP_WATCH_S`]), standing is no yielding: drive on. The
+/// local goal and its detours, in order, are planned among the static obstacles alone
+/// (the planning circle), at each pace fastest first, and the first path whose
+/// rectangle clears every moving obstacle in space-time (swept over the pace's time
+/// margin, as in planning) is taken. The planning circle, centred on the rear axle,
+/// keeps 2.3 m from a walker beside the car that the rectangle passes 1.5 m clear of;
+/// a walker converging from beside or behind can leave no circle-clear path while the
+/// rectangle is clear. None when standing is safe, or no such path exists.
+pub(super) fn escape(req: &PlanRequest, pacing: &Pacing) -> Option<PlanOutcome> {
+    let moving = |q: &PlanProblem| -> Vec<Obstacle> {
+        q.obstacles
+            .iter()
+            .filter(|o| o.vx != 0.0 || o.vy != 0.0)
+            .copied()
+            .collect()
+    };
+    let s = &req.problem.state;
+    let coast = pacing.speed_now.powi(2) / (2.0 * pacing.decel.max(MIN_DECEL));
+    let stand = (
+        s.x + coast * s.theta.cos(),
+        s.y + coast * s.theta.sin(),
+        s.theta,
+    );
+    if moving(&req.problem)
+        .iter()
+        .all(|o| req.footprint.clear_of_track(stand, o, 0.0, STOP_WATCH_S))
+    {
+        return None;
+    }
+    let goals =
+        std::iter::once((&req.problem, req.frame)).chain(req.detours.iter().map(|(q, f)| (q, *f)));
+    for (q, frame) in goals {
+        let tracks = moving(q);
+        let mut statics = q.clone();
+        statics.obstacles.retain(|o| o.vx == 0.0 && o.vy == 0.0);
+        let span = q.goal.x - q.state.x;
+        for &pace in &pacing.speeds {
+            statics.t_f = q.t_k + span / pace;
+            let margin = pacing.time_margin + pacing.schedule_slip(pace);
+            let clear = |t: &Trajectory| req.footprint.path_clear_of_moving(t, &tracks, margin);
+            if let Ok(Some(chosen)) = solve_one(&statics, req.steer_limit, &clear) {
+                let (trajectory, mut record) = record(req.time, &frame, Some(chosen), true);
+                record.escape = true;
+                return Some(PlanOutcome {
+                    time: req.time,
+                    frame,
+                    result: Ok((trajectory, record)),
+                });
+            }
+        }
+    }
+    None
+}
+
+/// The least deceleration the stand is reckoned with, m/s^2 (a configured 0 would put
+/// it at infinity).
+const MIN_DECEL: f64 = 0.1;
 
 /// Below this fraction of the fastest pace the local goal's path is slowed by traffic,
 /// and the detours are weighed against it.
@@ -310,9 +385,9 @@ fn solve_towards(
         let statics = f.clip_to_start(p.state.x, p.state.y, p.state.theta, &p.obstacles);
         (f, statics)
     });
-    let fits = fits.as_ref().map(|(f, o)| (*f, o.as_slice()));
+    let clear = |t: &Trajectory| fits.as_ref().is_none_or(|(f, o)| f.path_clear(t, o));
     let Some(pacing) = &req.pacing else {
-        let chosen = solve_one(p, req.steer_limit, fits)?;
+        let chosen = solve_one(p, req.steer_limit, &clear)?;
         return Ok(record(req.time, frame, chosen, false));
     };
     let span = p.goal.x - p.state.x;
@@ -343,7 +418,7 @@ fn solve_towards(
                 }
             })
             .collect();
-        if let Some(c) = solve_one(&problem, req.steer_limit, fits)? {
+        if let Some(c) = solve_one(&problem, req.steer_limit, &clear)? {
             let score = pacing.score(
                 c.trajectory.path().reference_cost(&line) / span.abs(),
                 pace,
@@ -367,12 +442,12 @@ const GUIDANCE_SAMPLING: planner::Sampling = planner::Sampling {
 };
 
 /// The chosen path of one planning problem: the planner's a6 when its path is within
-/// the steering limit (and `fits`: the car's rectangle clears these obstacles along
-/// it), else the cheapest feasible a6 whose path is; None when none.
+/// the steering limit (and `clear`: for example, the car's rectangle clears the static
+/// obstacles along it), else the cheapest feasible a6 whose path is; None when none.
 fn solve_one(
     problem: &PlanProblem,
     steer_limit: f64,
-    fits: Option<(&Footprint, &[Obstacle])>,
+    clear: &dyn Fn(&Trajectory) -> bool,
 ) -> Result<Option<Chosen>, ReplanError> {
     let options = PlanOptions {
         sampling: GUIDANCE_SAMPLING,
@@ -380,7 +455,6 @@ fn solve_one(
     };
     let step = planner::plan_with(problem, &options).map_err(ReplanError::Planner)?;
     let projected = step.result.projected_to_boundary;
-    let clear = |t: &Trajectory| fits.is_none_or(|(f, o)| f.path_clear(t, o));
     let within = !step
         .result
         .max_abs_steering
@@ -454,6 +528,7 @@ fn record(
         goal_blocked: false,
         kept: false,
         passing: false,
+        escape: false,
     };
     (chosen.map(|c| c.trajectory), record)
 }
