@@ -68,8 +68,10 @@
 //! `velocity_dead_band` (0.1 m/s) or when the velocity is not significant against its
 //! own covariance (`v' P_vv^-1 v < velocity_significance_chi2`, 9.21: 99% for two
 //! degrees of freedom), so static obstacles read zero instead of the filter's jitter,
-//! and until the velocity has passed both tests on every scan for `moving_confirm_s`
-//! (0.5 s): a jump of the vehicle's own position estimate (a GPS fix changing quality
+//! and until the velocity has passed both tests, and held them on every scan since,
+//! for `moving_confirm_s` (0.5 s; held: above the dead band and
+//! `velocity_hold_chi2`, 4.61, 90%, so a walker at 0.5 m/s, right at the entry
+//! threshold, does not flicker out of motion and stay a post): a jump of the vehicle's own position estimate (a GPS fix changing quality
 //! shifts every obstacle in the world frame at once) or a fragment briefly looks like
 //! motion, and a post taken for a moving obstacle makes the planner sweep it in time
 //! and yield to it for nothing. The filter's own state is never clipped.

@@ -97,10 +97,16 @@ pub struct PerceptionConfig {
     pub velocity_dead_band: f64,
     /// Velocities with v' P_vv^-1 v below this are reported as zero (0 disables).
     pub velocity_significance_chi2: f64,
+    /// Once a velocity has passed the significance test, it counts as significant
+    /// until v' P_vv^-1 v falls below this (at most `velocity_significance_chi2`):
+    /// a walker at 0.5 m/s, whose estimate's own covariance puts it right at the
+    /// entry threshold, must not flicker out of motion every few scans.
+    pub velocity_hold_chi2: f64,
     /// A velocity is reported only once it has passed the dead band and the
-    /// significance test on every scan for this long, seconds: a jump of the vehicle's
-    /// own position (a GPS fix changing quality) or a fragment of an object briefly
-    /// looks like motion and must not make a post a moving obstacle.
+    /// significance test and held them (the hold threshold) on every scan for this
+    /// long, seconds: a jump of the vehicle's own position (a GPS fix changing
+    /// quality) or a fragment of an object briefly looks like motion and must not make
+    /// a post a moving obstacle.
     pub moving_confirm_s: f64,
 }
 
@@ -143,6 +149,7 @@ impl Default for PerceptionConfig {
             radius_process_sigma: 0.02,
             velocity_dead_band: 0.1,
             velocity_significance_chi2: 9.21,
+            velocity_hold_chi2: 4.61,
             moving_confirm_s: 0.5,
         }
     }
@@ -218,6 +225,7 @@ impl PerceptionConfig {
                 "velocity_significance_chi2",
                 self.velocity_significance_chi2,
             ),
+            ("velocity_hold_chi2", self.velocity_hold_chi2),
             ("moving_confirm_s", self.moving_confirm_s),
         ] {
             if v.abs() > PLAUSIBLE_LIMIT {
@@ -305,6 +313,16 @@ impl PerceptionConfig {
             "velocity_significance_chi2",
             self.velocity_significance_chi2,
         )?;
+        non_negative("velocity_hold_chi2", self.velocity_hold_chi2)?;
+        if self.velocity_hold_chi2 > self.velocity_significance_chi2 {
+            return Err(invalid(
+                "velocity_hold_chi2",
+                format!(
+                    "must be at most velocity_significance_chi2 ({}), got {}",
+                    self.velocity_significance_chi2, self.velocity_hold_chi2
+                ),
+            ));
+        }
         Ok(())
     }
 }

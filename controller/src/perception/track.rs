@@ -270,17 +270,18 @@ impl PointTrack {
         self.life.record(true, cfg);
     }
 
-    /// The filter's velocity passes the dead band and the significance test.
-    fn velocity_significant(&self, cfg: &PerceptionConfig) -> bool {
+    /// The filter's velocity passes the dead band and the significance test with
+    /// `chi2` as its threshold (0 disables the test).
+    fn velocity_significant(&self, cfg: &PerceptionConfig, chi2: f64) -> bool {
         let v = Vector2::new(self.state[2], self.state[3]);
         if v.norm() < cfg.velocity_dead_band {
             return false;
         }
-        if cfg.velocity_significance_chi2 > 0.0 {
+        if chi2 > 0.0 {
             let pvv: Matrix2<f64> = self.cov.fixed_view::<2, 2>(2, 2).into_owned();
             if let Some(inv) = pvv.try_inverse() {
                 let m2 = (v.transpose() * inv * v)[(0, 0)];
-                if m2 < cfg.velocity_significance_chi2 {
+                if m2 < chi2 {
                     return false;
                 }
             }
@@ -288,9 +289,16 @@ impl PointTrack {
         true
     }
 
-    /// Track the persistence of a significant velocity at `stamp`.
+    /// Track the persistence of a significant velocity at `stamp`: it begins when the
+    /// velocity passes the significance test and lasts while it passes the (lower)
+    /// hold threshold.
     fn note_motion(&mut self, stamp: f64, cfg: &PerceptionConfig) {
-        if self.velocity_significant(cfg) {
+        let chi2 = if self.moving_since.is_some() {
+            cfg.velocity_hold_chi2.min(cfg.velocity_significance_chi2)
+        } else {
+            cfg.velocity_significance_chi2
+        };
+        if self.velocity_significant(cfg, chi2) {
             self.moving_since.get_or_insert(stamp);
         } else {
             self.moving_since = None;
