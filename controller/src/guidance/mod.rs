@@ -493,19 +493,21 @@ impl Navigator {
     }
 
     /// Whether the path being followed may be kept when a replanning finds no feasible
-    /// one: it was planned among static obstacles only, not through a passage nor
-    /// while turning to align; the car is on it (within [`KEEP_OFF_PATH`] and
-    /// [`KEEP_HEADING`]); at least [`KEEP_LEFT`] of it is left; and the rest of it
-    /// clears every obstacle now reported by the planning circle, as planned (none of
-    /// them moving). A car whose replanning needs a little more steering than allowed
-    /// (a tracking error, a sensor bias) then drives on along a path that holds, where
-    /// it would otherwise stop at once.
+    /// one: it was planned among static obstacles only, not while turning to align;
+    /// the car is on it (within [`KEEP_OFF_PATH`] and [`KEEP_HEADING`]); at least
+    /// [`KEEP_LEFT`] of it is left; and the rest of it clears every obstacle now
+    /// reported as planned (none of them moving): by the planning circle, or through a
+    /// passage by the car's rectangle grown by the passage margin, an obstacle the car
+    /// already stands within the margin of allowed no closer. A car whose replanning
+    /// needs a little more steering than allowed (a tracking error, a sensor bias), or
+    /// finds the edge of a gate it is driving through a few centimetres inside the
+    /// margin (GPS noise moves the world round the car), then drives on along a path
+    /// that holds, where it would otherwise stop at once.
     fn current_path_holds(&self, pose: &Pose, obstacles: &[Circle]) -> bool {
         let Some(t) = &self.active else {
             return false;
         };
         if self.paced
-            || self.passage
             || self.aligning.is_some()
             || obstacles.iter().any(|o| o.vx != 0.0 || o.vy != 0.0)
         {
@@ -520,13 +522,20 @@ impl Navigator {
         if off > KEEP_OFF_PATH || heading > KEEP_HEADING || left < KEEP_LEFT {
             return false;
         }
-        let r0 = self.wide().r0;
         let n = (left / KEEP_CHECK_STEP).ceil() as usize;
-        (0..=n).all(|j| {
+        let mut rest = (0..=n).map(|j| {
             let qx = x + left * j as f64 / n as f64;
             let (wx, wy) = self.frame.to_world(qx, path.y(qx));
-            clear_at(wx, wy, obstacles, (pose.x, pose.y), r0)
-        })
+            (wx, wy, self.frame.angle + path.heading(qx))
+        });
+        if self.passage {
+            let footprint = self.footprint();
+            let statics: Vec<planner::Obstacle> = obstacles.iter().map(Into::into).collect();
+            let clipped = footprint.clip_to_start(pose.x, pose.y, pose.theta, &statics);
+            return rest.all(|(wx, wy, heading)| footprint.clear_at(wx, wy, heading, &clipped));
+        }
+        let r0 = self.wide().r0;
+        rest.all(|(wx, wy, _)| clear_at(wx, wy, obstacles, (pose.x, pose.y), r0))
     }
 
     /// Whether a replanning is due at `now` from `pose` (not while reversing).
@@ -1103,6 +1112,48 @@ mod tests {
             Guidance::Drive { speed, .. } => assert!(speed < cfg.planner.cruise_speed),
             other => panic!("expected to drive, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn a_passage_path_is_kept_while_the_rectangle_clears_the_rest_of_it() {
+        let cfg = east_to(30.0);
+        // A fence across the route at x = 10 with a 2.0 m gate on the route.
+        let fence: Vec<Circle> = (0..16)
+            .flat_map(|k| {
+                let y = 1.25 + 0.5 * f64::from(k);
+                [post(10.0, y, 0.25), post(10.0, -y, 0.25)]
+            })
+            .collect();
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let start = car_at(0.0, 0.0, 0.0, 1.0);
+        assert!(matches!(
+            replan_and_follow(&mut nav, &start, &fence),
+            Guidance::Drive { .. }
+        ));
+        assert!(nav.passage, "planned through the gate");
+        // In the gate, the fence's end 0.2 m beside the car's side (inside the 0.25 m
+        // margin, as GPS noise puts it): a replanning allowed no steering finds nothing.
+        let pose = car_at(9.0, 0.0, 0.0, 1.0);
+        nav.follow(&pose);
+        let mut edge = fence.clone();
+        edge.push(post(10.0, 0.95, 0.15));
+        let starved = |nav: &Navigator, obstacles: &[Circle]| {
+            let mut req = nav.request(0.5, &pose, obstacles);
+            req.steer_limit = 1e-6;
+            req.detours.clear();
+            req.passages.clear();
+            solve(&req)
+        };
+        let outcome = starved(&nav, &edge);
+        assert!(
+            matches!(&outcome.result, Ok((None, r)) if r.kept),
+            "{:?}",
+            outcome.result
+        );
+        // A post on the rest of the path: not kept.
+        edge.push(post(16.0, 0.0, 0.3));
+        let outcome = starved(&nav, &edge);
+        assert!(matches!(&outcome.result, Ok((None, r)) if !r.kept));
     }
 
     #[test]
