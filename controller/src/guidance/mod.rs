@@ -826,6 +826,16 @@ mod tests {
         }
     }
 
+    /// A replanning from `pose` at 0.5 s allowed no steering and offered only the local
+    /// goal: it finds no path, and what is kept is up to the path being followed.
+    fn starved(nav: &Navigator, pose: &Pose, obstacles: &[Circle]) -> PlanOutcome {
+        let mut req = nav.request(0.5, pose, obstacles);
+        req.steer_limit = 1e-6;
+        req.detours.clear();
+        req.passages.clear();
+        solve(&req)
+    }
+
     fn replan_and_follow(nav: &mut Navigator, pose: &Pose, obstacles: &[Circle]) -> Guidance {
         assert!(nav.replan_due(0.0, pose));
         nav.issued(0.0);
@@ -846,13 +856,7 @@ mod tests {
         // On the path, 0.1 m off it: a replanning allowed no steering finds nothing.
         let pose = car_at(2.0, 0.1, 0.0, 2.0);
         nav.follow(&pose);
-        let starved = |nav: &Navigator, obstacles: &[Circle]| {
-            let mut req = nav.request(0.5, &pose, obstacles);
-            req.steer_limit = 1e-6;
-            req.detours.clear();
-            req.passages.clear();
-            solve(&req)
-        };
+        let starved = |nav: &Navigator, obstacles: &[Circle]| starved(nav, &pose, obstacles);
         let outcome = starved(&nav, &[post_beside]);
         let Ok((None, record)) = &outcome.result else {
             panic!("a path with no steering: {:?}", outcome.result);
@@ -1137,13 +1141,7 @@ mod tests {
         nav.follow(&pose);
         let mut edge = fence.clone();
         edge.push(post(10.0, 0.95, 0.15));
-        let starved = |nav: &Navigator, obstacles: &[Circle]| {
-            let mut req = nav.request(0.5, &pose, obstacles);
-            req.steer_limit = 1e-6;
-            req.detours.clear();
-            req.passages.clear();
-            solve(&req)
-        };
+        let starved = |nav: &Navigator, obstacles: &[Circle]| starved(nav, &pose, obstacles);
         let outcome = starved(&nav, &edge);
         assert!(
             matches!(&outcome.result, Ok((None, r)) if r.kept),
