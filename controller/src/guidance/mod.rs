@@ -171,8 +171,6 @@ pub struct Navigator {
     /// Turning towards the goal on this road-wheel angle before planning, radians.
     aligning: Option<f64>,
     next_replan: f64,
-    /// A replanning has finished.
-    planned: bool,
     infeasible_since: Option<f64>,
     /// Why the last replanning was refused, if it was.
     planner_error: Option<ReplanError>,
@@ -209,7 +207,6 @@ impl Navigator {
             goal_blocked: false,
             aligning: None,
             next_replan: 0.0,
-            planned: false,
             infeasible_since: None,
             planner_error: None,
             reversing: None,
@@ -548,7 +545,9 @@ impl Navigator {
     /// Guidance has what it needs to drive from `pose`: a replanning has finished (with
     /// a path or without), or none is needed (within the final approach).
     pub fn planned(&self, pose: &Pose) -> bool {
-        self.planned
+        // Every finished replanning leaves a record, or the planner's refusal.
+        !self.plans.is_empty()
+            || self.planner_error.is_some()
             || self.route.length() - self.progress_at(pose) <= self.cfg.planner.final_approach
     }
 
@@ -561,7 +560,6 @@ impl Navigator {
     /// while the car reverses (on a planning thread) was planned from where it stood,
     /// and is dropped.
     pub fn accept(&mut self, outcome: PlanOutcome) {
-        self.planned = true;
         if self.reversing.is_some() {
             return;
         }

@@ -294,7 +294,7 @@ impl PointTrack {
     /// hold threshold.
     fn note_motion(&mut self, stamp: f64, cfg: &PerceptionConfig) {
         let chi2 = if self.moving_since.is_some() {
-            cfg.velocity_hold_chi2.min(cfg.velocity_significance_chi2)
+            cfg.velocity_hold_chi2
         } else {
             cfg.velocity_significance_chi2
         };
