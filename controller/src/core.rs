@@ -132,6 +132,14 @@ enum Planning {
     /// In the tick that asks for it, taken at the next tick: the thread's timing when
     /// the plan takes less than a tick, deterministically (a replay of a HIL run).
     NextTick(Option<Box<PlanOutcome>>),
+    /// In the tick that asks for it, taken at the first tick at or after the next of
+    /// `taken_at` (controller seconds): the planning thread's timing as the
+    /// controller's own recording kept it (a replay of that recording). None is asked
+    /// for while one waits, as with the thread.
+    Recorded {
+        taken_at: std::collections::VecDeque<f64>,
+        waiting: Option<Box<PlanOutcome>>,
+    },
 }
 
 /// The controller.
@@ -165,6 +173,8 @@ pub struct Controller {
     fault_detail: u16,
     /// Commands the controller did not send, watched for on the bus.
     watch: ActuationWatch,
+    /// Replannings taken (their outcomes handed to the navigator).
+    plans_taken: u64,
     pub samples: Vec<Sample>,
 }
 
@@ -197,6 +207,7 @@ impl Controller {
             fault_code: FaultReportCode::Internal,
             fault_detail: 0,
             watch: ActuationWatch::new(),
+            plans_taken: 0,
             samples: Vec::new(),
         })
     }
@@ -204,8 +215,15 @@ impl Controller {
     /// Replan on a thread of its own from now on (the binary does; SIL keeps replanning
     /// inline so runs stay deterministic).
     pub fn with_planning_thread(mut self) -> std::io::Result<Controller> {
-        self.planning = Planning::Thread(PlanWorker::spawn()?);
+        self.start_planning_thread()?;
         Ok(self)
+    }
+
+    /// [`Controller::with_planning_thread`] on a controller already built, before its
+    /// first tick (a SIL run's, to plan as the binary does).
+    pub fn start_planning_thread(&mut self) -> std::io::Result<()> {
+        self.planning = Planning::Thread(PlanWorker::spawn()?);
+        Ok(())
     }
 
     /// Take each replanning at the tick after the one that asked for it, as the
@@ -216,6 +234,22 @@ impl Controller {
         self
     }
 
+    /// Take each replanning at the recorded instants `taken_at` (controller seconds,
+    /// in order): for replaying the controller's own recording, whose loop took them
+    /// from its planning thread then.
+    pub fn with_plans_taken_at(mut self, taken_at: Vec<f64>) -> Controller {
+        self.planning = Planning::Recorded {
+            taken_at: taken_at.into(),
+            waiting: None,
+        };
+        self
+    }
+
+    /// How many replannings the controller has taken so far.
+    pub fn plans_taken(&self) -> u64 {
+        self.plans_taken
+    }
+
     /// Start a replanning when one is due and take the finished ones.
     fn plan(&mut self, now: f64, pose: &Pose) {
         match &mut self.planning {
@@ -224,11 +258,13 @@ impl Controller {
                     self.nav.issued(now);
                     let outcome = solve(&self.nav.request(now, pose, &self.obstacles));
                     self.nav.accept(outcome);
+                    self.plans_taken += 1;
                 }
             }
             Planning::NextTick(done) => {
                 if let Some(outcome) = done.take() {
                     self.nav.accept(*outcome);
+                    self.plans_taken += 1;
                 }
                 if self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
@@ -243,6 +279,7 @@ impl Controller {
                 while let Ok(outcome) = w.outcomes.try_recv() {
                     self.nav.accept(outcome);
                     w.in_flight = false;
+                    self.plans_taken += 1;
                 }
                 if !w.in_flight && self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
@@ -250,6 +287,23 @@ impl Controller {
                         .requests
                         .send(self.nav.request(now, pose, &self.obstacles))
                         .is_ok();
+                }
+            }
+            Planning::Recorded { taken_at, waiting } => {
+                if waiting.is_some() && taken_at.front().is_some_and(|t| *t <= now + 1e-6) {
+                    taken_at.pop_front();
+                    if let Some(outcome) = waiting.take() {
+                        self.nav.accept(*outcome);
+                        self.plans_taken += 1;
+                    }
+                }
+                if waiting.is_none() && self.nav.replan_due(now, pose) {
+                    self.nav.issued(now);
+                    *waiting = Some(Box::new(solve(&self.nav.request(
+                        now,
+                        pose,
+                        &self.obstacles,
+                    ))));
                 }
             }
         }

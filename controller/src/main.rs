@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! ugv-controller run --config mission.toml --gps /dev/ttyUSB0 --laser SERVICE --can can0
+//! ugv-controller run ... --log logs/today      and record its ports (replay: ugv-sim replay)
 //! ugv-controller plan [problem.json]        one planning step, JSON in and out
 //! ugv-controller anfis train --data runs.csv --target steer_cmd --output model.json
 //! ugv-controller check-config mission.toml
@@ -27,6 +28,7 @@ use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
+use ugv_controller::record::{RecordMode, RunInfo, Writer};
 use ugv_controller::runtime::Runtime;
 use ugv_controller::trace::TraceWriter;
 
@@ -92,6 +94,12 @@ struct RunArgs {
     /// it drives.
     #[arg(long)]
     record: Option<PathBuf>,
+    /// Record what crosses the controller's ports into this directory (created if
+    /// missing) as it drives: run.mcap (every input at the tick that took it, every
+    /// frame sent, the controller's state and paths), bus.log (candump -l) and
+    /// gps.nmea (the raw line), for Foxglove and for `ugv-sim replay`.
+    #[arg(long, value_name = "DIR")]
+    log: Option<PathBuf>,
     /// Seconds between status lines (0: none).
     #[arg(long, default_value_t = 1.0)]
     status_every: f64,
@@ -267,6 +275,27 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         "{}",
         rt_sched.promotion.describe("ugv-controller: command loop")
     );
+    if let Some(dir) = &args.log {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("--log: creating {}", dir.display()))?;
+        let info = RunInfo {
+            mode: RecordMode::Field,
+            scenario: args.config.as_ref().map_or_else(
+                || "the paper's mission (default configuration)".to_owned(),
+                |p| p.display().to_string(),
+            ),
+            physics_hz: 1.0 / COMMAND_PERIOD,
+            // The loop's t = 0: its clock starts below.
+            epoch_unix_ns: firmware_bridge::clock::unix_ns(std::time::SystemTime::now()),
+            can_interface: args.can.clone(),
+            gps_sentences: ReaderConfig::default().complete_when,
+            gps_baud: args.baud,
+            controller_toml: toml::to_string_pretty(&cfg)?,
+        };
+        let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
+            .with_context(|| format!("--log: recording into {}", dir.display()))?;
+        rt = rt.with_recorder(writer);
+    }
     let mut clock = WallClock::new(COMMAND_PERIOD);
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
     let tty = std::io::stderr().is_terminal();
@@ -327,6 +356,12 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     );
     if let Some(e) = rt.trace_error() {
         eprintln!("ugv-controller: the trace is incomplete: {e}");
+    }
+    if let Some(summary) = rt.finish_recording() {
+        eprintln!(
+            "ugv-controller: {}",
+            ugv_controller::record::describe(&summary)
+        );
     }
     Ok(ExitCode::from(exit.code()))
 }

@@ -10,7 +10,8 @@
 //! controller estops (estop heartbeat, FAULT_REPORT, both ECUs commanded disabled) and
 //! keeps telling the bus so for [`LOST_PORT_GRACE`] before the loop ends. The trace
 //! goes out while the loop runs ([`TraceWriter`]), so whatever ends the process leaves
-//! it on disk.
+//! it on disk; so does the controller's own recording of its ports, when made
+//! ([`Runtime::with_recorder`]).
 
 use std::collections::VecDeque;
 use std::io::{Read, Write};
@@ -25,8 +26,10 @@ use golf_car_can::{
     ControllerHeartbeat, ControllerHeartbeatState, FaultReportCode, GolfCarMessage,
 };
 use serde::Serialize;
+use serde_json::json;
 
 use crate::core::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
+use crate::record::{RecordSummary, Writer, topics};
 use crate::trace::{FixTiming, Trace, TraceWriter};
 
 /// How long a controller that lost a port keeps sending its estop before the loop
@@ -57,6 +60,9 @@ pub enum InputError {
 pub trait GpsInput {
     /// The events completed by what the port has now.
     fn poll(&mut self) -> Result<Vec<ReadEvent>, InputError>;
+
+    /// The bytes the last poll read off the line (for the controller's recording).
+    fn last_read(&self) -> &[u8];
 }
 
 /// The laser port: validated frames, oldest first, never blocking.
@@ -70,6 +76,10 @@ impl<P: Read + Write> GpsInput for NmeaLink<P> {
             NmeaError::Io { .. } => InputError::Lost(e.to_string()),
             other => InputError::Malformed(other.to_string()),
         })
+    }
+
+    fn last_read(&self) -> &[u8] {
+        NmeaLink::last_read(self)
     }
 }
 
@@ -90,6 +100,8 @@ impl LaserInput for LaserSubscriber {
 pub struct MemGps {
     reader: NmeaReader,
     pending: Vec<u8>,
+    /// What the last poll read.
+    last: Vec<u8>,
     lost: Option<String>,
 }
 
@@ -98,6 +110,7 @@ impl MemGps {
         MemGps {
             reader: NmeaReader::new(config),
             pending: Vec::new(),
+            last: Vec::new(),
             lost: None,
         }
     }
@@ -118,9 +131,13 @@ impl GpsInput for MemGps {
         if let Some(why) = &self.lost {
             return Err(InputError::Lost(why.clone()));
         }
-        let events = self.reader.feed(&self.pending).collect();
-        self.pending.clear();
-        Ok(events)
+        self.last.clear();
+        std::mem::swap(&mut self.last, &mut self.pending);
+        Ok(self.reader.feed(&self.last).collect())
+    }
+
+    fn last_read(&self) -> &[u8] {
+        &self.last
     }
 }
 
@@ -237,6 +254,8 @@ pub struct Runtime<G, L, B> {
     next_heartbeat: f64,
     trace: Option<TraceWriter>,
     trace_error: Option<String>,
+    /// The controller's own recording (`run --log`), when made.
+    recorder: Option<Writer>,
     /// Fix timings on the monotonic clock (the binary on the wires), when kept.
     fix_timing: Option<Vec<FixTiming>>,
     unanswered: Vec<(f64, u64)>,
@@ -272,6 +291,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             next_heartbeat: 0.0,
             trace: None,
             trace_error: None,
+            recorder: None,
             fix_timing: None,
             unanswered: Vec::new(),
             stats: InputStats::default(),
@@ -285,6 +305,25 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         self
     }
 
+    /// Record what crosses the ports into `writer` as the loop goes (the controller's
+    /// own recording, [`crate::record`]): each input at the tick that took it, each
+    /// frame sent, the ticks the replannings were taken at and the ticks skipped.
+    pub fn with_recorder(mut self, writer: Writer) -> Self {
+        self.record_into(writer);
+        self
+    }
+
+    /// [`Runtime::with_recorder`] on a running loop, from its next tick.
+    pub fn record_into(&mut self, writer: Writer) {
+        self.can.keep_frames();
+        self.recorder = Some(writer);
+    }
+
+    /// Close the recording; what it holds (none without one).
+    pub fn finish_recording(&mut self) -> Option<RecordSummary> {
+        self.recorder.take().and_then(Writer::finish)
+    }
+
     /// Stamp each fix's read and the first steering command after it on the
     /// machine's monotonic clock (HIL latency figures; not deterministic, so not SIL).
     pub fn with_fix_timing(mut self) -> Self {
@@ -294,6 +333,10 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
 
     pub fn controller(&self) -> &Controller {
         &self.ctl
+    }
+
+    pub fn controller_mut(&mut self) -> &mut Controller {
+        &mut self.ctl
     }
 
     pub fn can(&self) -> &CanPort<B> {
@@ -316,6 +359,9 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
     /// End the run: estop heartbeats for [`STOP_GRACE`] from `now`, then the loop ends.
     pub fn request_stop(&mut self, now: f64) {
         if self.closing.is_none() {
+            if let Some(w) = &mut self.recorder {
+                w.log_other(topics::CONTROLLER_STOP, now, &json!({ "requested": true }));
+            }
             let exit = if matches!(self.ctl.mode(), Mode::Estop { .. }) {
                 Exit::StoppedInEstop
             } else {
@@ -352,7 +398,11 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             self.ctl.on_can(now, &r);
         }
         if !self.gps_lost {
-            match self.gps.poll() {
+            let polled = self.gps.poll();
+            if let Some(w) = &mut self.recorder {
+                w.nmea(now, self.gps.last_read());
+            }
+            match polled {
                 Ok(events) => {
                     for event in events {
                         if let ReadEvent::Fix(reading) = event {
@@ -384,16 +434,11 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         if !self.laser_lost {
             for _ in 0..MAX_FRAMES_PER_TICK {
                 match self.laser.try_recv() {
-                    // A frozen scanner sends its last scan again: the same sequence
-                    // and acquisition time. Only a new scan shows that it sees.
-                    Ok(Some(frame))
-                        if self.last_scan_id == Some((frame.sequence, frame.stamp_ns)) =>
-                    {
-                        self.stats.laser_frames_repeated += 1;
-                    }
                     Ok(Some(frame)) => {
-                        self.last_scan_id = Some((frame.sequence, frame.stamp_ns));
-                        self.ctl.on_scan(now, &scan_of(&frame, now));
+                        if let Some(w) = &mut self.recorder {
+                            w.laser(now, &frame);
+                        }
+                        self.take_scan(now, &frame);
                     }
                     Ok(None) => break,
                     Err(e @ InputError::Malformed(_)) => {
@@ -412,6 +457,34 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                 }
             }
         }
+    }
+
+    /// A laser frame taken: a frozen scanner sends its last scan again (the same
+    /// sequence and acquisition time), and only a new scan shows that it sees.
+    fn take_scan(&mut self, now: f64, frame: &LaserFrame) {
+        let id = (frame.sequence, frame.stamp_ns);
+        if self.last_scan_id == Some(id) {
+            self.stats.laser_frames_repeated += 1;
+        } else {
+            self.last_scan_id = Some(id);
+            self.ctl.on_scan(now, &scan_of(frame, now));
+        }
+    }
+
+    /// The tick's frames and the controller after it onto the recording.
+    fn record_tick(&mut self, now: f64, plans_taken: u64) {
+        let Some(w) = &mut self.recorder else {
+            return;
+        };
+        for f in self.can.take_frames() {
+            w.can(now, f.id, f.extended, &f.data, None);
+        }
+        let taken = self.ctl.plans_taken();
+        if taken != plans_taken {
+            w.log_other(topics::CONTROLLER_PLANNING, now, &json!({ "taken": taken }));
+        }
+        w.controller(now, &self.ctl);
+        w.maybe_flush();
     }
 
     fn send(&mut self, m: &GolfCarMessage) -> Result<(), BridgeError> {
@@ -463,6 +536,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             self.write_trace(now, true);
             return Some(exit);
         }
+        let plans_taken = self.ctl.plans_taken();
         self.read_inputs(now);
         let messages = self.ctl.tick(now);
         let heartbeats_only = self.closing.as_ref().is_some_and(|c| c.heartbeats_only);
@@ -479,13 +553,13 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         } else {
             messages
         };
-        for m in &out {
-            if let Err(e) = self.send(m) {
-                self.write_trace(now, true);
-                return Some(Exit::CanLost {
-                    reason: e.to_string(),
-                });
-            }
+        let sent = out.iter().try_for_each(|m| self.send(m));
+        self.record_tick(now, plans_taken);
+        if let Err(e) = sent {
+            self.write_trace(now, true);
+            return Some(Exit::CanLost {
+                reason: e.to_string(),
+            });
         }
         if self.ctl.finished() && self.closing.is_none() {
             self.write_trace(now, true);
@@ -515,6 +589,14 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             let missed = (late / COMMAND_PERIOD).floor();
             if missed >= 1.0 && missed.is_finite() {
                 let missed = missed as u64;
+                if let Some(w) = &mut self.recorder {
+                    let from = k as f64 * COMMAND_PERIOD;
+                    w.log_other(
+                        topics::CONTROLLER_SKIPPED,
+                        from,
+                        &json!({ "ticks": missed }),
+                    );
+                }
                 self.skipped_ticks += missed;
                 k += missed;
             }
@@ -565,12 +647,26 @@ mod tests {
     #[test]
     fn a_tick_that_comes_late_skips_the_ticks_it_missed() {
         let bus = MemBus::new();
+        let dir = tempfile::tempdir().expect("tempdir");
+        let info = crate::record::RunInfo {
+            mode: crate::record::RecordMode::Field,
+            scenario: "stalling clock".to_owned(),
+            physics_hz: 1.0 / COMMAND_PERIOD,
+            epoch_unix_ns: 1_000_000_000,
+            can_interface: "mem".to_owned(),
+            gps_sentences: ReaderConfig::default().complete_when,
+            gps_baud: 115_200,
+            controller_toml: String::new(),
+        };
+        let writer =
+            Writer::create(Some(dir.path()), foxglove::Context::new(), info).expect("recorder");
         let mut rt = Runtime::new(
             Controller::new(&ControllerConfig::default()).expect("controller"),
             MemGps::new(ReaderConfig::default()),
             MemLaser::default(),
             CanPort::new(bus.endpoint(), "mem"),
-        );
+        )
+        .with_recorder(writer);
         let mut clock = StallingClock {
             at: 5,
             late: 0.105,
@@ -593,5 +689,30 @@ mod tests {
             times.windows(2).skip(5).all(|w| w[1] == w[0] + 1),
             "{times:?}"
         );
+        // The controller's own recording says which: ten ticks from tick 5 (50 ms),
+        // and every heartbeat it sent (one every 20 ms while waiting for its sensors).
+        let summary = rt.finish_recording().expect("a recording");
+        assert_eq!(summary.error, None);
+        let bytes = std::fs::read(dir.path().join(crate::record::MCAP_FILE)).expect("run.mcap");
+        let mut skipped = Vec::new();
+        let mut stops = Vec::new();
+        let mut frames = 0;
+        for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+            let m = m.expect("a message");
+            match m.channel.topic.as_str() {
+                topics::CONTROLLER_SKIPPED => skipped.push((
+                    m.log_time - 1_000_000_000,
+                    String::from_utf8_lossy(&m.data).into_owned(),
+                )),
+                topics::CONTROLLER_STOP => stops.push(m.log_time - 1_000_000_000),
+                topics::CAN_RAW => frames += 1,
+                _ => {}
+            }
+        }
+        assert_eq!(skipped, [(50_000_000, r#"{"ticks":10}"#.to_owned())]);
+        // And when it was asked to stop: once, at the tick after the 30th.
+        assert_eq!(stops, [300_000_000]);
+        assert_eq!(frames, summary.can_frames);
+        assert!(frames >= 8, "{summary:?}");
     }
 }

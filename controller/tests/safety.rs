@@ -230,6 +230,27 @@ fn waits_for_sensors_then_enables_with_an_edge_and_drives() {
     rig.assert_limits();
 }
 
+/// A replay of the controller's own recording takes each replanning at the tick the
+/// recorded loop took it from its planning thread, and none while one waits.
+#[test]
+fn replannings_are_taken_at_the_recorded_ticks() {
+    let mut rig = Rig::new();
+    rig.ctl = Controller::new(&rig.cfg)
+        .expect("controller")
+        .with_plans_taken_at(vec![0.25, 0.6]);
+    rig.run(0.0, 0.24, ALL);
+    assert!(rig.ctl.nav.plans.is_empty(), "the first waits for 0.25 s");
+    rig.run(0.24, 0.59, ALL);
+    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.plans_taken()), (1, 1));
+    rig.run(0.59, 1.5, ALL);
+    // The third was asked for but the recording took no more.
+    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.plans_taken()), (2, 2));
+    assert_eq!(
+        rig.ctl.nav.plans[0].time, 0.0,
+        "asked for at the first tick"
+    );
+}
+
 #[test]
 fn start_up_gaps_pass_while_disabled_and_the_first_path_is_planned_before_enabling() {
     let mut rig = Rig::new();

@@ -74,6 +74,18 @@ pub struct CanPort<B = CanSocket> {
     heard: Option<Vec<u16>>,
     /// Frames received but not handed out (not among `heard`).
     overheard: u64,
+    /// Every frame handed out and sent, kept for a recorder ([`CanPort::keep_frames`]).
+    kept: Option<Vec<KeptFrame>>,
+}
+
+/// A frame a [`CanPort`] received (and handed out) or sent, as it was on the bus.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct KeptFrame {
+    pub id: u32,
+    pub extended: bool,
+    pub data: Vec<u8>,
+    /// Sent by this port (else received).
+    pub sent: bool,
 }
 
 impl<B> CanPort<B>
@@ -91,7 +103,19 @@ where
             bus_errors: 0,
             heard: None,
             overheard: 0,
+            kept: None,
         }
+    }
+
+    /// Keep every frame handed out by [`CanPort::try_recv`] and every frame sent, in
+    /// bus order, until [`CanPort::take_frames`] takes them: the controller's recorder.
+    pub fn keep_frames(&mut self) {
+        self.kept.get_or_insert_with(Vec::new);
+    }
+
+    /// The frames kept since the last call (none unless [`CanPort::keep_frames`]).
+    pub fn take_frames(&mut self) -> Vec<KeptFrame> {
+        self.kept.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     /// Hand out only frames with these standard IDs (error frames still come) and
@@ -166,7 +190,17 @@ where
         let started = Instant::now();
         loop {
             match self.bus.transmit(&frame) {
-                Ok(_) => return Ok(()),
+                Ok(_) => {
+                    if let Some(kept) = &mut self.kept {
+                        kept.push(KeptFrame {
+                            id: u32::from(id),
+                            extended: false,
+                            data: data.to_vec(),
+                            sent: true,
+                        });
+                    }
+                    return Ok(());
+                }
                 Err(nb::Error::WouldBlock) if started.elapsed() < TX_RETRY => {
                     std::thread::sleep(Duration::from_micros(200));
                 }
@@ -206,6 +240,14 @@ where
             Id::Standard(id) => (u32::from(id.as_raw()), false),
             Id::Extended(id) => (id.as_raw(), true),
         };
+        if let Some(kept) = &mut self.kept {
+            kept.push(KeptFrame {
+                id,
+                extended,
+                data: frame.data().to_vec(),
+                sent: false,
+            });
+        }
         match self
             .rx
             .accept_parts(id, extended, frame.is_remote_frame(), frame.data())

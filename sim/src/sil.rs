@@ -14,7 +14,7 @@ use ugv_controller::trace::Trace;
 use crate::ecu::EcuKind;
 use crate::faults::ProcessFault;
 use crate::record::{
-    Outputs, RecordError, RecordMode, RecordSummary, Recorder, Recording, RunInfo,
+    Outputs, RecordError, RecordMode, RecordSummary, Recorder, Recording, run_info,
 };
 use crate::run::{Outcome, Sim, SimError};
 use crate::scenario::Scenario;
@@ -128,7 +128,7 @@ pub fn run_sil_outputs(
     let mut rec = match outputs.any() {
         true => {
             let toml = toml::to_string_pretty(cfg).unwrap_or_default();
-            let info = RunInfo::of(RecordMode::Sil, &scenario, toml);
+            let info = run_info(RecordMode::Sil, &scenario, toml);
             Some(Recording::new(
                 Recorder::create(outputs, &scenario, info)?,
                 bus.endpoint(),

@@ -2,7 +2,9 @@
 //! candump sees the same frames in the same order; a HIL run records bus.log with
 //! the kernel's receive timestamps and run.mcap with the wall clock alongside, and
 //! `ugv-sim replay` finds its commands within the HIL tolerance (the figures it
-//! prints are the ones the README's tolerance should be checked against).
+//! prints are the ones the README's tolerance should be checked against), while the
+//! controller's own recording of the same run (`ugv-controller run --log`) replays
+//! byte for byte.
 //!
 //! Needs vcan (fails loudly without it); the README's test command runs it natively
 //! or inside `vcan-setup vm`, with UGV_BIN_DIR pointing at the release binaries.
@@ -88,6 +90,7 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
     let vcan = TestVcan::new("hrec")?;
     let dir = tempfile::tempdir()?;
     let results = dir.path().join("results");
+    let own = dir.path().join("controller-log");
     let run_id = format!("rec-{}", std::process::id());
     let started = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?;
     let out = Command::new(workspace_bin("ugv-sim")?)
@@ -98,6 +101,9 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
         .arg(&results)
         .arg("--gps-link")
         .arg(dir.path().join("gps"))
+        // The controller's own recording beside the simulator's.
+        .args(["--controller-arg", "--log", "--controller-arg"])
+        .arg(&own)
         .output()
         .context("running ugv-sim")?;
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -135,5 +141,34 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
     // The replay: the controller library fed the recording from the moment the
     // recorded controller started (its process, after the simulator's), to the end.
     replay_hil_recording(&results, 0.0..10.0)?;
+    // The controller's own recording of the same run (`run --log`): every input at
+    // the tick that took it, the ticks it skipped and took its paths at, so it
+    // replays byte for byte however the guest stalled.
+    let out = Command::new(workspace_bin("ugv-sim")?)
+        .arg("replay")
+        .arg(own.join(MCAP_FILE))
+        .output()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    eprintln!(
+        "{}\n{text}",
+        String::from_utf8_lossy(&out.stderr).trim_end()
+    );
+    ensure!(out.status.code() == Some(0), "{:?}", out.status);
+    let report: serde_json::Value = serde_json::from_str(&text)?;
+    ensure!(
+        report["mode"] == "field" && report["divergence"].is_null(),
+        "{report}"
+    );
+    for message in ["STEERING_CMD", "THROTTLE_CMD", "CONTROLLER_HEARTBEAT"] {
+        let m = &report["messages"][message];
+        ensure!(
+            m["recorded"].as_u64() > Some(500) && m["matched"] == m["recorded"],
+            "{message}: {m}"
+        );
+    }
+    ensure!(
+        std::fs::read_to_string(own.join(BUS_LOG))?.lines().count() > 3000,
+        "the controller's bus.log"
+    );
     Ok(())
 }

@@ -14,6 +14,8 @@ pub struct NmeaLink<P> {
     port: P,
     reader: NmeaReader,
     buf: Vec<u8>,
+    /// Bytes the last poll read (the start of `buf`).
+    last: usize,
 }
 
 impl<P: Read + Write> NmeaLink<P> {
@@ -22,18 +24,27 @@ impl<P: Read + Write> NmeaLink<P> {
             port,
             reader: NmeaReader::new(config),
             buf: vec![0; 1024],
+            last: 0,
         }
     }
 
     /// One read from the port (blocking up to the port's timeout) fed to the reader;
     /// the events it completed. A timeout or `WouldBlock` yields no events.
     pub fn poll(&mut self) -> Result<Vec<ReadEvent>, NmeaError> {
+        self.last = 0;
         let n = read_now(&mut self.port, &mut self.buf).map_err(|source| NmeaError::Io {
             context: "reading the GPS port".into(),
             source,
         })?;
+        self.last = n;
         let bytes = self.buf.get(..n).unwrap_or(&[]);
         Ok(self.reader.feed(bytes).collect())
+    }
+
+    /// The bytes the last [`NmeaLink::poll`] read, as they came off the line (for a
+    /// recorder).
+    pub fn last_read(&self) -> &[u8] {
+        self.buf.get(..self.last).unwrap_or(&[])
     }
 
     /// Poll until a reading arrives or `timeout` has passed (wall clock: for HIL

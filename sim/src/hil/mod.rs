@@ -36,7 +36,7 @@ use crate::measure::fix_latency;
 use crate::mode::Mode;
 use crate::record::live::LiveView;
 use crate::record::tap::SocketTap;
-use crate::record::{Outputs, RecordError, RecordMode, Recorder, Recording, RunInfo};
+use crate::record::{Outputs, RecordError, RecordMode, Recorder, Recording, run_info};
 use crate::run::{Outcome, Sim, SimError, Snapshot};
 use crate::scenario::Scenario;
 use crate::verdict::{RunEnd, judge_and_write};
@@ -333,7 +333,7 @@ pub fn run_scenario(
     let mut recording = match tap {
         Some(tap) => {
             let toml = toml::to_string_pretty(config).unwrap_or_default();
-            let info = RunInfo::of(RecordMode::Hil, sc, toml);
+            let info = run_info(RecordMode::Hil, sc, toml);
             let outputs = Outputs {
                 dir: options.record.then_some(options.results.as_path()),
                 live: options.live.as_deref(),

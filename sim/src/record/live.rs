@@ -145,9 +145,8 @@ mod tests {
 
     use firmware_bridge::laser::LaserFrame;
 
-    use super::super::{Outputs, Recorder, RunInfo, topics};
+    use super::super::{Outputs, RecordMode, Recorder, run_info, topics};
     use super::*;
-    use crate::mode::Mode;
     use crate::scenario::Scenario;
 
     #[test]
@@ -260,7 +259,7 @@ mod tests {
     fn a_client_that_stops_reading_never_blocks_the_logging_thread() {
         let live = LiveView::start("127.0.0.1:0".parse().unwrap()).unwrap();
         let sc = Scenario::paper().unwrap();
-        let info = RunInfo::of(Mode::Sil, &sc, String::new());
+        let info = run_info(RecordMode::Sil, &sc, String::new());
         let mut rec = Recorder::create(
             Outputs {
                 dir: None,
@@ -323,7 +322,7 @@ mod tests {
                 start.elapsed() < Duration::from_secs(30),
                 "the client never got a message"
             );
-            rec.laser(t, &frame());
+            rec.w.laser(t, &frame());
             t += 0.02;
             std::thread::sleep(Duration::from_millis(10));
         }
@@ -332,7 +331,7 @@ mod tests {
         let mut slowest = Duration::ZERO;
         for _ in 0..5000 {
             let one = Instant::now();
-            rec.laser(t, &frame());
+            rec.w.laser(t, &frame());
             slowest = slowest.max(one.elapsed());
             t += 0.02;
         }

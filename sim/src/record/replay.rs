@@ -9,7 +9,11 @@
 //! its own, on its own clock and behind a paced serial line, so its commands come at
 //! other instants than the replay's: it is compared with [`Tolerance::HIL`], which
 //! pairs each replayed command with the recorded one of the same message nearest in
-//! time and compares signal values within bounds (README, "Replay").
+//! time and compares signal values within bounds (README, "Replay"). The controller's
+//! own recording (`ugv-controller run --log`: on the car, on the bench, beside a HIL
+//! run) holds every input at the tick that took it, the ticks its loop skipped and
+//! the ticks it took each replanning at and the one it was asked to stop at: it
+//! replays byte for byte too.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -29,7 +33,7 @@ use ugv_controller::runtime::{MemGps, MemLaser, Runtime};
 use ugv_controller::trace::TraceWriter;
 
 use super::tap::{BusTap, TapFrame};
-use super::{CONFIG_ATTACHMENT, RUN_METADATA, RecordMode, RunInfo, topics};
+use super::{CONFIG_ATTACHMENT, RUN_METADATA, RecordMode, RunInfo, direction, topics};
 
 /// Why a recording cannot be replayed.
 #[derive(Debug, thiserror::Error)]
@@ -106,6 +110,15 @@ pub struct Recorded {
     pub truncated: Option<String>,
     /// Frames the replay cannot inject (extended IDs: not on this bus).
     pub skipped: u64,
+    /// The controller's own recording: when its loop took each replanning from its
+    /// planning thread, controller seconds.
+    plans_taken_at: Vec<f64>,
+    /// The controller's own recording: the ticks its loop skipped (first tick's
+    /// index, how many).
+    ticks_skipped: Vec<(u64, u64)>,
+    /// The controller's own recording: when it was asked to stop (a signal),
+    /// controller seconds.
+    stop_requested: Option<f64>,
 }
 
 fn field<T: serde::de::DeserializeOwned>(
@@ -231,6 +244,10 @@ impl Recorded {
         let mut inputs = Vec::new();
         let mut commands = Vec::new();
         let mut skipped = 0;
+        let mut plans_taken_at = Vec::new();
+        let mut ticks_skipped = Vec::new();
+        let mut stop_requested = None;
+        let seconds = |ns: u64| (i128::from(ns) - i128::from(info.epoch_unix_ns)) as f64 * 1e-9;
         // HIL: a CAN frame's log time is the tick that read it, its kernel receive
         // time rides along (wall_unix_ns). The simulator stamps each NMEA sentence
         // with the wall clock when it handled the tick (never before the tick's
@@ -294,7 +311,7 @@ impl Recorded {
                         }
                         _ => ns,
                     };
-                    if super::direction(&spec, id) == "rx" {
+                    if direction(&spec, id) == "rx" {
                         commands.push(Command {
                             ns,
                             id,
@@ -308,6 +325,17 @@ impl Recorded {
                             _ => skipped += 1,
                         }
                     }
+                }
+                topics::CONTROLLER_PLANNING => plans_taken_at.push(seconds(ns)),
+                topics::CONTROLLER_STOP => {
+                    stop_requested.get_or_insert(seconds(ns));
+                }
+                topics::CONTROLLER_SKIPPED => {
+                    let n = json()?["ticks"]
+                        .as_u64()
+                        .ok_or_else(|| bad("no numeric \"ticks\"".to_owned()))?;
+                    let first = (seconds(ns) / COMMAND_PERIOD).round().max(0.0) as u64;
+                    ticks_skipped.push((first, n));
                 }
                 _ => {}
             }
@@ -323,6 +351,9 @@ impl Recorded {
             commands,
             truncated,
             skipped,
+            plans_taken_at,
+            ticks_skipped,
+            stop_requested,
         })
     }
 }
@@ -387,9 +418,12 @@ impl Tolerance {
         settle_s: 1.5,
     };
 
+    /// SIL's recordings and the controller's own replay exactly (the same inputs at
+    /// the same ticks, the replannings taken at the recorded ticks); HIL's within
+    /// [`Tolerance::HIL`].
     pub fn for_mode(mode: RecordMode) -> Tolerance {
         match mode {
-            RecordMode::Sil => Tolerance::EXACT,
+            RecordMode::Sil | RecordMode::Field => Tolerance::EXACT,
             RecordMode::Hil => Tolerance::HIL,
         }
     }
@@ -670,14 +704,22 @@ fn arrivals(rec: &Recorded) -> Vec<(u64, &Input)> {
 /// `start_ns` to `last_ns`, as the SIL loop ran it. A HIL recording is replayed on the
 /// same grid from the recorded controller's start (its own ticks, read off the bursts
 /// of frames it sent, replayed worse in the recordings measured: README, "Replay").
+/// The controller's own recording: its loop's ticks, less those it skipped.
 fn ticks(rec: &Recorded, start_ns: u64, last_ns: u64) -> impl Iterator<Item = (f64, u64)> {
     let ns_of = move |t: f64| start_ns + (t.max(0.0) * 1e9).round() as u64;
     let dt = 1.0 / rec.info.physics_hz;
     let control_every = ((COMMAND_PERIOD / dt).round() as u64).max(1);
+    let skipped = rec.ticks_skipped.clone();
     (0..)
         .map(move |k: u64| (k * control_every) as f64 * dt)
         .map(move |now| (now, ns_of(now)))
         .take_while(move |(_, ns)| *ns <= last_ns)
+        .filter(move |(now, _)| {
+            let k = (now / COMMAND_PERIOD).round() as u64;
+            !skipped
+                .iter()
+                .any(|&(first, n)| (first..first + n).contains(&k))
+        })
 }
 
 /// How many bytes of NMEA a serial line (a pty's or a tty's receive buffer) keeps for
@@ -685,13 +727,14 @@ fn ticks(rec: &Recorded, start_ns: u64, last_ns: u64) -> impl Iterator<Item = (f
 const LINE_BUFFER: usize = 4096;
 
 /// Where the replayed controller's clock starts, nanoseconds on the recording's log
-/// time. SIL: at the recording's epoch, as the controller library did. HIL: at the
+/// time. SIL and the controller's own recording: at the recording's epoch, as the
+/// controller's loop did. HIL: at the
 /// recorded controller's first frame, since its process started on its own clock some
 /// time after the simulator began recording (a controller that starts at the epoch
 /// would wait for ECUs that the recording shows enabling only later, and estop).
 fn controller_start(rec: &Recorded) -> u64 {
     match rec.info.mode {
-        RecordMode::Sil => rec.info.epoch_unix_ns,
+        RecordMode::Sil | RecordMode::Field => rec.info.epoch_unix_ns,
         RecordMode::Hil => rec
             .commands
             .first()
@@ -763,10 +806,14 @@ pub fn replay(
 ) -> Result<ReplayReport, ReplayError> {
     let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?;
     let bus = MemBus::new();
-    // The binary replans on a thread and takes the plan at the next tick.
+    // The binary replans on a thread: in HIL its plan is taken at the next tick; its
+    // own recording says at which.
     let controller = match rec.info.mode {
         RecordMode::Sil => Controller::new(&rec.config)?,
         RecordMode::Hil => Controller::new(&rec.config)?.with_plans_taken_next_tick(),
+        RecordMode::Field => {
+            Controller::new(&rec.config)?.with_plans_taken_at(rec.plans_taken_at.clone())
+        }
     };
     let can = CanPort::new(bus.endpoint(), "replay");
     ugv_controller::runtime::accept_controller_ids(&can)?;
@@ -820,6 +867,9 @@ pub fn replay(
             }
             feed(&mut rt, &mut ecus, input);
             next_input += 1;
+        }
+        if rec.stop_requested.is_some_and(|t| t <= now + 1e-6) {
+            rt.request_stop(now);
         }
         if let Some(e) = rt.step(now) {
             exit = Some(e.describe());
@@ -876,6 +926,9 @@ mod tests {
             commands,
             truncated: None,
             skipped: 0,
+            plans_taken_at: Vec::new(),
+            ticks_skipped: Vec::new(),
+            stop_requested: None,
         }
     }
 
@@ -939,6 +992,29 @@ mod tests {
         // oldest first, with the newest scan between them; the frame sent within the
         // socket's 10 ms before the start, not the one before it was opened.
         assert_eq!(kinds, ["gps3", "laser", "gps4", "can2"]);
+    }
+
+    #[test]
+    fn the_controllers_own_recording_replays_on_its_ticks_less_those_it_skipped() {
+        let ms = 1_000_000;
+        let inputs = vec![(1_000 + 30 * ms, Input::Gps(vec![b'$'; 1152]))];
+        let mut rec = recording(RecordMode::Field, inputs, vec![heartbeat(1_000 + 200 * ms)]);
+        rec.info.physics_hz = 100.0;
+        rec.ticks_skipped = vec![(5, 10), (18, 1)];
+        let at: Vec<u64> = ticks(&rec, controller_start(&rec), 1_000 + 200 * ms)
+            .map(|(now, ns)| {
+                assert_eq!(ns, 1_000 + (now * 1e9).round() as u64);
+                (now * 100.0).round() as u64
+            })
+            .collect();
+        let expected: Vec<u64> = (0..=20)
+            .filter(|k| !(5..15).contains(k) && *k != 18)
+            .collect();
+        assert_eq!(at, expected);
+        // Its inputs are fed at the tick that took them (the line's time is behind
+        // them), and compared exactly.
+        assert_eq!(arrivals(&rec)[0].0, 1_000 + 30 * ms);
+        assert_eq!(Tolerance::for_mode(RecordMode::Field), Tolerance::EXACT);
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! The recording's MCAP topics (the same names on the live view).
+//! The recording's MCAP topics (the same names on the live view and in the
+//! controller's own recording).
 
 /// `foxglove.LaserScan`, at the scanner's rate; the channel's metadata holds the
 /// frame's constant fields (angle_min, angle_increment, time_increment, scan_time,
@@ -15,8 +16,8 @@ pub const TF: &str = "/tf";
 pub const POSE: &str = "/vehicle/pose";
 /// `foxglove.SceneUpdate` of the scenario's obstacles where they are.
 pub const OBSTACLES: &str = "/world/obstacles";
-/// `foxglove.SceneUpdate` with each path the controller planned (in-process
-/// controller only).
+/// `foxglove.SceneUpdate` with each path the controller planned (SIL's in-process
+/// controller, and the controller's own recording).
 pub const PLANS: &str = "/controller/plans";
 /// JSON `{"id", "extended", "data": hex, "direction": "rx"|"tx"}` (and
 /// `wall_unix_ns`, the kernel's receive time, in HIL), one per frame on the bus.
@@ -24,5 +25,16 @@ pub const CAN_RAW: &str = "/can/raw";
 /// JSON `{"id", "message", "signals": {name: value}}` per golf_car.dbc, one per frame
 /// of a message the DBC defines.
 pub const CAN_DECODED: &str = "/can/decoded";
-/// JSON state of the in-process controller: mode, estimated pose, obstacles seen.
+/// JSON state of the controller (SIL's in-process one, and the controller's own
+/// recording): mode, estimated pose, obstacles seen.
 pub const CONTROLLER_STATE: &str = "/controller/state";
+/// JSON `{"taken": n}`: the controller's loop took its n-th replanning from its
+/// planning thread at this tick (the controller's own recording, `ugv-controller run
+/// --log`), so that a replay takes each at the same tick.
+pub const CONTROLLER_PLANNING: &str = "/controller/planning";
+/// JSON `{"ticks": n}`: the controller's loop came late and skipped n ticks from this
+/// one on (the controller's own recording).
+pub const CONTROLLER_SKIPPED: &str = "/controller/skipped";
+/// JSON `{"requested": true}`: the controller was asked to stop (a signal) at this
+/// tick (the controller's own recording).
+pub const CONTROLLER_STOP: &str = "/controller/stop";

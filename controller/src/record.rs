@@ -1,0 +1,651 @@
+//! Recordings in formats others read: one writer for the simulator's recording of
+//! every run (`ugv-sim run`, which adds the world's topics to it) and the
+//! controller's own (`ugv-controller run --log DIR`, on the car or on the bench).
+//!
+//! - `run.mcap` (Foxglove SDK, its built-in schemas): the laser as
+//!   `foxglove.LaserScan`, every CAN frame raw and decoded per golf_car.dbc (JSON), the
+//!   NMEA sentences (JSON), the controller's state (JSON) and planned paths
+//!   (`foxglove.SceneUpdate`), topics in [`topics`].
+//! - `bus.log`: every CAN frame in `candump -l` form, for canplayer and `ugv-can decode`.
+//! - `gps.nmea`: the NMEA byte stream exactly as it went over the line, for gpsfake.
+//!
+//! Written as the run goes with bounded buffering: MCAP chunks close when they reach
+//! [`CHUNK_SIZE`] and at least every [`FLUSH_PERIOD`] of wall-clock time, when the two
+//! text files reach the kernel too, so a process killed with SIGKILL leaves everything
+//! up to its last second readable (an MCAP without its summary section is still read
+//! by a streaming reader). A write error stops the recording, not the run.
+//!
+//! The controller's own recording ([`RecordMode::Field`]) is made at its loop's seam
+//! ([`crate::runtime::Runtime::with_recorder`]): every input at the tick that took it,
+//! every frame it sent, the ticks at which it took its replannings from the planning
+//! thread, the ticks it skipped and the one it was asked to stop at, on its clock (log time = the wall clock at its
+//! start + its time). A replay feeds the same inputs at the same ticks into the same
+//! code and gets the same frames, byte for byte.
+
+pub mod topics;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use firmware_bridge::clock::unix_ns;
+use firmware_bridge::laser::LaserFrame;
+use foxglove::schemas::{
+    Color, LaserScan, LinePrimitive, Point3, SceneEntity, SceneUpdate, Timestamp,
+};
+use foxglove::{Channel, Context, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel};
+use golf_car_can::candump::Compact;
+use golf_car_can::spec::NetworkSpec;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::core::Controller;
+
+/// The recording's file names in its directory.
+pub const MCAP_FILE: &str = "run.mcap";
+pub const BUS_LOG: &str = "bus.log";
+pub const NMEA_FILE: &str = "gps.nmea";
+
+/// Longest wall-clock time between two flushes to the kernel.
+pub const FLUSH_PERIOD: Duration = Duration::from_secs(1);
+
+/// An MCAP chunk is closed when it holds this many bytes (or at the next flush).
+pub const CHUNK_SIZE: u64 = 1 << 20;
+
+/// Seconds between two controller states when nothing changed.
+const STATE_PERIOD: f64 = 0.1;
+
+/// The longest NMEA line kept while waiting for its end: bytes that never end a line
+/// (noise on the wire) are logged as one at this length.
+const MAX_LINE: usize = 4096;
+
+/// Why a recording could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("creating {path}: {source}")]
+    Create {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("starting the MCAP writer on {path}: {source}")]
+    Mcap {
+        path: String,
+        #[source]
+        source: foxglove::FoxgloveError,
+    },
+    #[error("creating the channel {topic}: {source}")]
+    Channel {
+        topic: String,
+        #[source]
+        source: foxglove::FoxgloveError,
+    },
+    #[error("golf_car.dbc: {0}")]
+    Dbc(#[from] golf_car_can::spec::SpecError),
+    #[error("the CAN tap on {iface}: {source}")]
+    Tap {
+        iface: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Which loop made a recording; written `"sil"`, `"hil"`, `"field"`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordMode {
+    /// The simulator's, of a SIL run (the controller in-process, in lockstep).
+    Sil,
+    /// The simulator's, of a HIL run (the controller binary in a process of its own).
+    Hil,
+    /// The controller binary's own (`ugv-controller run --log`): on the car, on the
+    /// bench, or beside a HIL run.
+    Field,
+}
+
+/// What a replay needs to know about the run, kept in the MCAP metadata record
+/// [`RUN_METADATA`] (one string per field) and the attachment [`CONFIG_ATTACHMENT`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunInfo {
+    pub mode: RecordMode,
+    /// The scenario's name (the simulator's recordings), or what the controller was
+    /// started with (its own).
+    pub scenario: String,
+    /// Physics rate, Hz (SIL's controller ticks fall on its steps); the controller's
+    /// tick rate in its own recordings.
+    pub physics_hz: f64,
+    /// UTC of t = 0, ns since 1970: log time = this + the run's time.
+    pub epoch_unix_ns: u64,
+    /// The CAN interface named in bus.log.
+    pub can_interface: String,
+    /// The GPS sentences that complete an epoch (the controller's reader setting).
+    pub gps_sentences: firmware_bridge::nmea::SentenceSet,
+    /// The GPS line's baud rate: in HIL a sentence reaches the controller once its
+    /// last byte crossed the line.
+    pub gps_baud: u32,
+    /// The controller's configuration (TOML), for a replay into the same controller.
+    #[serde(skip)]
+    pub controller_toml: String,
+}
+
+/// Name of the MCAP metadata record with the [`RunInfo`].
+pub const RUN_METADATA: &str = "ugv-hil run";
+/// Name of the MCAP attachment with the controller's configuration.
+pub const CONFIG_ATTACHMENT: &str = "controller.toml";
+
+impl RunInfo {
+    /// As the MCAP metadata record: each field as JSON text.
+    fn metadata(&self) -> BTreeMap<String, String> {
+        match serde_json::to_value(self) {
+            Ok(serde_json::Value::Object(map)) => {
+                map.into_iter().map(|(k, v)| (k, v.to_string())).collect()
+            }
+            _ => BTreeMap::new(),
+        }
+    }
+}
+
+/// What a recording holds, for the log and the tests.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct RecordSummary {
+    pub dir: PathBuf,
+    pub can_frames: u64,
+    pub nmea_sentences: u64,
+    pub laser_scans: u64,
+    pub fixes: u64,
+    /// CAN frames the recorder's tap lost: the kernel dropped them from its full
+    /// receive queue (HIL; absent where it cannot happen or cannot be told).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub can_frames_lost: Option<u32>,
+    /// The first error writing the recording (the run went on without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+/// A line for the log: what was recorded where.
+pub fn describe(s: &RecordSummary) -> String {
+    format!(
+        "recorded {} CAN frames{}, {} NMEA sentences, {} laser scans in {}{}",
+        s.can_frames,
+        match s.can_frames_lost {
+            Some(n) if n > 0 => format!(" ({n} more lost by the tap's full queue)"),
+            _ => String::new(),
+        },
+        s.nmea_sentences,
+        s.laser_scans,
+        s.dir.display(),
+        s.error
+            .as_ref()
+            .map(|e| format!(" (incomplete: {e})"))
+            .unwrap_or_default()
+    )
+}
+
+/// A Foxglove timestamp of `ns` since 1970.
+pub fn timestamp(ns: u64) -> Timestamp {
+    Timestamp::new(
+        u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
+        (ns % 1_000_000_000) as u32,
+    )
+}
+
+/// Direction of a frame seen from the ECUs' side of the bus (the simulator's, in its
+/// recordings): `rx` what the controller sends (towards the ECUs), `tx` what the ECUs
+/// send (towards the controller). The controller's own recording says the same.
+pub fn direction(spec: &NetworkSpec, id: u32) -> &'static str {
+    let controller = u16::try_from(id)
+        .ok()
+        .and_then(|id| spec.message(id))
+        .is_some_and(|m| m.senders.iter().any(|s| s == "CONTROLLER"));
+    if controller { "rx" } else { "tx" }
+}
+
+/// A text file written through a buffer, its first error kept.
+#[derive(Debug)]
+struct TextOut {
+    path: PathBuf,
+    out: Option<BufWriter<File>>,
+}
+
+impl TextOut {
+    fn create(path: PathBuf) -> Result<TextOut, RecordError> {
+        let file = File::create(&path).map_err(|source| RecordError::Create {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Ok(TextOut {
+            path,
+            out: Some(BufWriter::new(file)),
+        })
+    }
+
+    /// No file (a live view without a recording).
+    fn none() -> TextOut {
+        TextOut {
+            path: PathBuf::new(),
+            out: None,
+        }
+    }
+
+    fn write(&mut self, bytes: &[u8], error: &mut Option<String>) {
+        if let Some(o) = &mut self.out
+            && let Err(e) = o.write_all(bytes)
+        {
+            self.fail(e, error);
+        }
+    }
+
+    fn flush(&mut self, error: &mut Option<String>) {
+        if let Some(o) = &mut self.out
+            && let Err(e) = o.flush()
+        {
+            self.fail(e, error);
+        }
+    }
+
+    fn fail(&mut self, e: std::io::Error, error: &mut Option<String>) {
+        error.get_or_insert_with(|| format!("writing {}: {e}", self.path.display()));
+        self.out = None;
+    }
+}
+
+fn json_channel(
+    ctx: &Arc<Context>,
+    topic: &str,
+) -> Result<Arc<RawChannel>, foxglove::FoxgloveError> {
+    ctx.channel_builder(topic)
+        .message_encoding("json")
+        .build_raw()
+}
+
+/// Writes one recording: the topics every recording has, on a [`Context`] the
+/// simulator adds its world's channels to.
+pub struct Writer {
+    ctx: Arc<Context>,
+    mcap: Option<McapWriterHandle<BufWriter<File>>>,
+    laser: Option<Channel<LaserScan>>,
+    plans: Channel<SceneUpdate>,
+    can_raw: Arc<RawChannel>,
+    can_decoded: Arc<RawChannel>,
+    nmea: Arc<RawChannel>,
+    state: Arc<RawChannel>,
+    /// JSON channels made when first logged to (the controller's own topics).
+    other: BTreeMap<&'static str, Arc<RawChannel>>,
+    bus_log: TextOut,
+    nmea_file: TextOut,
+    /// The start of an NMEA line whose end has not come yet.
+    nmea_line: Vec<u8>,
+    spec: NetworkSpec,
+    info: RunInfo,
+    last_flush: Instant,
+    next_state: f64,
+    last_mode: Option<String>,
+    plans_seen: usize,
+    /// Whether files are written (else the channels serve a live view only).
+    files: bool,
+    summary: RecordSummary,
+}
+
+impl std::fmt::Debug for Writer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Writer")
+            .field("summary", &self.summary)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Writer {
+    /// Start a recording: the files in `dir` (which must exist) when given, the
+    /// channels on `ctx` (a live view's, or a new one).
+    pub fn create(
+        dir: Option<&Path>,
+        ctx: Arc<Context>,
+        info: RunInfo,
+    ) -> Result<Writer, RecordError> {
+        let base = dir.unwrap_or(Path::new(""));
+        let mcap_path = base.join(MCAP_FILE);
+        let mcap_err = |source| RecordError::Mcap {
+            path: mcap_path.display().to_string(),
+            source,
+        };
+        let mcap = match dir {
+            Some(_) => {
+                let file = File::create(&mcap_path).map_err(|source| RecordError::Create {
+                    path: mcap_path.display().to_string(),
+                    source,
+                })?;
+                let options = McapWriteOptions::new()
+                    .compression(None)
+                    .chunk_size(Some(CHUNK_SIZE));
+                let mcap = ctx
+                    .mcap_writer_with_options(options)
+                    .create(BufWriter::new(file))
+                    .map_err(mcap_err)?;
+                mcap.write_metadata(RUN_METADATA, info.metadata())
+                    .map_err(mcap_err)?;
+                mcap.attach(&foxglove::McapAttachment {
+                    log_time: info.epoch_unix_ns,
+                    create_time: info.epoch_unix_ns,
+                    name: CONFIG_ATTACHMENT.to_owned(),
+                    media_type: "application/toml".to_owned(),
+                    data: std::borrow::Cow::Borrowed(info.controller_toml.as_bytes()),
+                })
+                .map_err(mcap_err)?;
+                Some(mcap)
+            }
+            None => None,
+        };
+        let json = |topic: &str| {
+            json_channel(&ctx, topic).map_err(|source| RecordError::Channel {
+                topic: topic.to_owned(),
+                source,
+            })
+        };
+        let text = |name| match dir {
+            Some(dir) => TextOut::create(dir.join(name)),
+            None => Ok(TextOut::none()),
+        };
+        Ok(Writer {
+            laser: None,
+            plans: ctx.channel_builder(topics::PLANS).build(),
+            can_raw: json(topics::CAN_RAW)?,
+            can_decoded: json(topics::CAN_DECODED)?,
+            nmea: json(topics::NMEA)?,
+            state: json(topics::CONTROLLER_STATE)?,
+            other: BTreeMap::new(),
+            mcap,
+            bus_log: text(BUS_LOG)?,
+            nmea_file: text(NMEA_FILE)?,
+            nmea_line: Vec::new(),
+            spec: NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?,
+            info,
+            last_flush: Instant::now(),
+            next_state: 0.0,
+            last_mode: None,
+            plans_seen: 0,
+            files: dir.is_some(),
+            summary: RecordSummary {
+                dir: base.to_path_buf(),
+                ..RecordSummary::default()
+            },
+            ctx,
+        })
+    }
+
+    /// The context the channels log through (to add channels of one's own).
+    pub fn context(&self) -> &Arc<Context> {
+        &self.ctx
+    }
+
+    pub fn info(&self) -> &RunInfo {
+        &self.info
+    }
+
+    /// The count of what was logged, to add to.
+    pub fn summary_mut(&mut self) -> &mut RecordSummary {
+        &mut self.summary
+    }
+
+    /// Keep the first error (the recording goes on as far as it can).
+    pub fn note_error(&mut self, error: String) {
+        self.summary.error.get_or_insert(error);
+    }
+
+    /// Log time of the run's time `t`, ns since 1970.
+    pub fn ns(&self, t: f64) -> u64 {
+        self.info.epoch_unix_ns + (t.max(0.0) * 1e9).round() as u64
+    }
+
+    /// The wall clock alongside the run's time (HIL only: SIL has none, and the
+    /// controller's own log time is its wall clock).
+    pub fn wall(&self) -> Option<u64> {
+        (self.info.mode == RecordMode::Hil).then(|| unix_ns(SystemTime::now()))
+    }
+
+    pub fn log_json(&self, channel: &RawChannel, t: f64, value: &serde_json::Value) {
+        let bytes = value.to_string();
+        channel.log_with_meta(bytes.as_bytes(), PartialMetadata::with_log_time(self.ns(t)));
+    }
+
+    /// `value` on the JSON topic `topic`, created when first logged to.
+    pub fn log_other(&mut self, topic: &'static str, t: f64, value: &serde_json::Value) {
+        if !self.other.contains_key(topic) {
+            match json_channel(&self.ctx, topic) {
+                Ok(c) => {
+                    self.other.insert(topic, c);
+                }
+                Err(e) => {
+                    self.note_error(format!("creating the channel {topic}: {e}"));
+                    return;
+                }
+            }
+        }
+        if let Some(c) = self.other.get(topic) {
+            self.log_json(c, t, value);
+        }
+    }
+
+    /// NMEA bytes that went over the line at `t`: into gps.nmea as they are, and each
+    /// line they end onto `/gps/nmea` (without its CR LF; a line's start waits for its
+    /// end, bytes that are not UTF-8 are replaced).
+    pub fn nmea(&mut self, t: f64, bytes: &[u8]) {
+        if bytes.is_empty() {
+            return;
+        }
+        let mut error = self.summary.error.take();
+        self.nmea_file.write(bytes, &mut error);
+        self.summary.error = error;
+        let wall = self.wall();
+        for &b in bytes {
+            self.nmea_line.push(b);
+            if b != b'\n' && self.nmea_line.len() < MAX_LINE {
+                continue;
+            }
+            let line = std::mem::take(&mut self.nmea_line);
+            let text = String::from_utf8_lossy(&line);
+            let sentence = text.trim_end_matches(['\r', '\n']);
+            if sentence.is_empty() {
+                continue;
+            }
+            let mut m = json!({ "sentence": sentence });
+            if let Some(w) = wall {
+                m["wall_unix_ns"] = w.into();
+            }
+            self.log_json(&self.nmea, t, &m);
+            self.summary.nmea_sentences += 1;
+        }
+    }
+
+    /// A laser frame at `t` as `foxglove.LaserScan` (the channel's metadata keeps the
+    /// frame's constant fields exactly, for replay).
+    pub fn laser(&mut self, t: f64, frame: &LaserFrame) {
+        if self.laser.is_none() {
+            // f32 text round-trips.
+            let meta = BTreeMap::from([
+                ("angle_min".to_owned(), frame.angle_min.to_string()),
+                (
+                    "angle_increment".to_owned(),
+                    frame.angle_increment.to_string(),
+                ),
+                (
+                    "time_increment".to_owned(),
+                    frame.time_increment.to_string(),
+                ),
+                ("scan_time".to_owned(), frame.scan_time.to_string()),
+                ("range_min".to_owned(), frame.range_min.to_string()),
+                ("range_max".to_owned(), frame.range_max.to_string()),
+            ]);
+            self.laser = Some(
+                self.ctx
+                    .channel_builder(topics::LASER)
+                    .metadata(meta)
+                    .build(),
+            );
+        }
+        let Some(channel) = &self.laser else {
+            return;
+        };
+        channel.log_with_time(
+            &LaserScan {
+                timestamp: Some(timestamp(frame.stamp_ns)),
+                frame_id: "laser".to_owned(),
+                pose: None,
+                start_angle: f64::from(frame.angle_min),
+                end_angle: f64::from(frame.angle_max()),
+                ranges: frame.ranges().iter().map(|r| f64::from(*r)).collect(),
+                intensities: frame.intensities().iter().map(|r| f64::from(*r)).collect(),
+            },
+            self.ns(t),
+        );
+        self.summary.laser_scans += 1;
+    }
+
+    /// One CAN frame on the bus at `t`, with the kernel's receive time when known
+    /// (bus.log then carries it, and `/can/raw` as `wall_unix_ns`).
+    pub fn can(
+        &mut self,
+        t: f64,
+        id: u32,
+        extended: bool,
+        data: &[u8],
+        kernel: Option<SystemTime>,
+    ) {
+        let ns = self.ns(t);
+        let stamp = kernel.map_or(ns, unix_ns);
+        let compact = Compact { id, extended, data };
+        let line = format!(
+            "({}.{:06}) {} {compact}\n",
+            stamp / 1_000_000_000,
+            (stamp % 1_000_000_000) / 1000,
+            self.info.can_interface
+        );
+        let mut error = self.summary.error.take();
+        self.bus_log.write(line.as_bytes(), &mut error);
+        self.summary.error = error;
+        let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
+        let mut raw = json!({
+            "id": id,
+            "extended": extended,
+            "data": hex,
+            "direction": direction(&self.spec, id),
+        });
+        if let Some(k) = kernel {
+            raw["wall_unix_ns"] = unix_ns(k).into();
+        }
+        self.log_json(&self.can_raw, t, &raw);
+        let message = (!extended)
+            .then(|| u16::try_from(id).ok())
+            .flatten()
+            .and_then(|id| self.spec.message(id));
+        if let (Some(m), Ok(p)) = (message, golf_car_can::codec::payload("", data)) {
+            let signals: serde_json::Map<String, serde_json::Value> = m
+                .decode_all(&p)
+                .into_iter()
+                .map(|v| (v.name.to_owned(), v.value.into()))
+                .collect();
+            let decoded = json!({ "id": id, "message": m.name, "signals": signals });
+            self.log_json(&self.can_decoded, t, &decoded);
+        }
+        self.summary.can_frames += 1;
+    }
+
+    /// The controller's state (on change of mode and every [`STATE_PERIOD`]) and its
+    /// new planned paths, at `t`.
+    pub fn controller(&mut self, t: f64, ctl: &Controller) {
+        let mode = serde_json::to_value(ctl.mode()).unwrap_or_default();
+        let mode_text = mode.to_string();
+        let changed = self.last_mode.as_deref() != Some(mode_text.as_str());
+        if changed || t + 1e-9 >= self.next_state {
+            self.next_state = t + STATE_PERIOD;
+            let pose = ctl.pose(t).and_then(|p| serde_json::to_value(p).ok());
+            let state = json!({
+                "mode": mode,
+                "changed": changed,
+                "pose": pose,
+                "obstacles": ctl.obstacles(),
+                "stop_reason": ctl.stop_reason(),
+            });
+            self.log_json(&self.state, t, &state);
+            self.last_mode = Some(mode_text);
+        }
+        let plans = &ctl.nav.plans;
+        if plans.len() > self.plans_seen {
+            let ns = self.ns(t);
+            let green = Color {
+                r: 0.1,
+                g: 0.8,
+                b: 0.3,
+                a: 1.0,
+            };
+            for p in &plans[self.plans_seen..] {
+                let entity = SceneEntity {
+                    timestamp: Some(timestamp(ns)),
+                    frame_id: "world".to_owned(),
+                    id: "plan".to_owned(),
+                    lines: vec![LinePrimitive {
+                        r#type: foxglove::schemas::line_primitive::Type::LineStrip as i32,
+                        thickness: 0.1,
+                        points: p
+                            .path
+                            .iter()
+                            .map(|q| Point3 {
+                                x: q[0],
+                                y: q[1],
+                                z: 0.05,
+                            })
+                            .collect(),
+                        color: Some(green),
+                        ..LinePrimitive::default()
+                    }],
+                    ..SceneEntity::default()
+                };
+                self.plans.log_with_time(
+                    &SceneUpdate {
+                        deletions: Vec::new(),
+                        entities: vec![entity],
+                    },
+                    ns,
+                );
+            }
+            self.plans_seen = plans.len();
+        }
+    }
+
+    /// Hand what was written to the kernel when [`FLUSH_PERIOD`] has passed.
+    pub fn maybe_flush(&mut self) {
+        if self.last_flush.elapsed() >= FLUSH_PERIOD {
+            self.flush();
+        }
+    }
+
+    fn flush(&mut self) {
+        self.last_flush = Instant::now();
+        let mut error = self.summary.error.take();
+        self.bus_log.flush(&mut error);
+        self.nmea_file.flush(&mut error);
+        if let Some(m) = &self.mcap
+            && let Err(e) = m.flush()
+        {
+            error.get_or_insert_with(|| format!("writing {MCAP_FILE}: {e}"));
+            self.mcap = None;
+        }
+        self.summary.error = error;
+    }
+
+    /// Close the files (the MCAP with its summary section); what they hold, when files
+    /// were written.
+    pub fn finish(mut self) -> Option<RecordSummary> {
+        self.flush();
+        if let Some(m) = self.mcap.take()
+            && let Err(e) = m.close()
+        {
+            self.summary
+                .error
+                .get_or_insert_with(|| format!("closing {MCAP_FILE}: {e}"));
+        }
+        self.files.then(|| self.summary.clone())
+    }
+}
