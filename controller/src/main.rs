@@ -294,7 +294,9 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         };
         let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
             .with_context(|| format!("--log: recording into {}", dir.display()))?;
-        rt = rt.with_recorder(writer);
+        rt = rt
+            .with_recorder(writer)
+            .context("--log: starting the recorder's thread")?;
     }
     let mut clock = WallClock::new(COMMAND_PERIOD);
     let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;

@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
+use firmware_bridge::can::KeptFrame;
 use firmware_bridge::clock::unix_ns;
 use firmware_bridge::laser::LaserFrame;
 use foxglove::schemas::{
@@ -281,9 +282,7 @@ pub struct Writer {
     spec: NetworkSpec,
     info: RunInfo,
     last_flush: Instant,
-    next_state: f64,
-    last_mode: Option<String>,
-    plans_seen: usize,
+    cadence: StateCadence,
     /// Whether files are written (else the channels serve a live view only).
     files: bool,
     summary: RecordSummary,
@@ -363,9 +362,7 @@ impl Writer {
             spec: NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?,
             info,
             last_flush: Instant::now(),
-            next_state: 0.0,
-            last_mode: None,
-            plans_seen: 0,
+            cadence: StateCadence::default(),
             files: dir.is_some(),
             summary: RecordSummary {
                 dir: base.to_path_buf(),
@@ -373,15 +370,6 @@ impl Writer {
             },
             ctx,
         })
-    }
-
-    /// The context the channels log through (to add channels of one's own).
-    pub fn context(&self) -> &Arc<Context> {
-        &self.ctx
-    }
-
-    pub fn info(&self) -> &RunInfo {
-        &self.info
     }
 
     /// The count of what was logged, to add to.
@@ -401,11 +389,11 @@ impl Writer {
 
     /// The wall clock alongside the run's time (HIL only: SIL has none, and the
     /// controller's own log time is its wall clock).
-    pub fn wall(&self) -> Option<u64> {
+    fn wall(&self) -> Option<u64> {
         (self.info.mode == RecordMode::Hil).then(|| unix_ns(SystemTime::now()))
     }
 
-    pub fn log_json(&self, channel: &RawChannel, t: f64, value: &serde_json::Value) {
+    fn log_json(&self, channel: &RawChannel, t: f64, value: &serde_json::Value) {
         let bytes = value.to_string();
         channel.log_with_meta(bytes.as_bytes(), PartialMetadata::with_log_time(self.ns(t)));
     }
@@ -555,63 +543,51 @@ impl Writer {
     /// The controller's state (on change of mode and every [`STATE_PERIOD`]) and its
     /// new planned paths, at `t`.
     pub fn controller(&mut self, t: f64, ctl: &Controller) {
-        let mode = serde_json::to_value(ctl.mode()).unwrap_or_default();
-        let mode_text = mode.to_string();
-        let changed = self.last_mode.as_deref() != Some(mode_text.as_str());
-        if changed || t + 1e-9 >= self.next_state {
-            self.next_state = t + STATE_PERIOD;
-            let pose = ctl.pose(t).and_then(|p| serde_json::to_value(p).ok());
-            let state = json!({
-                "mode": mode,
-                "changed": changed,
-                "pose": pose,
-                "obstacles": ctl.obstacles(),
-                "stop_reason": ctl.stop_reason(),
-            });
+        let (state, plans) = self.cadence.take(t, ctl);
+        if let Some(state) = state {
             self.log_json(&self.state, t, &state);
-            self.last_mode = Some(mode_text);
         }
-        let plans = &ctl.nav.plans;
-        if plans.len() > self.plans_seen {
-            let ns = self.ns(t);
-            let green = Color {
-                r: 0.1,
-                g: 0.8,
-                b: 0.3,
-                a: 1.0,
-            };
-            for p in &plans[self.plans_seen..] {
-                let entity = SceneEntity {
-                    timestamp: Some(timestamp(ns)),
-                    frame_id: "world".to_owned(),
-                    id: "plan".to_owned(),
-                    lines: vec![LinePrimitive {
-                        r#type: foxglove::schemas::line_primitive::Type::LineStrip as i32,
-                        thickness: 0.1,
-                        points: p
-                            .path
-                            .iter()
-                            .map(|q| Point3 {
-                                x: q[0],
-                                y: q[1],
-                                z: 0.05,
-                            })
-                            .collect(),
-                        color: Some(green),
-                        ..LinePrimitive::default()
-                    }],
-                    ..SceneEntity::default()
-                };
-                self.plans.log_with_time(
-                    &SceneUpdate {
-                        deletions: Vec::new(),
-                        entities: vec![entity],
-                    },
-                    ns,
-                );
-            }
-            self.plans_seen = plans.len();
+        for path in plans {
+            self.plan(t, &path);
         }
+    }
+
+    /// A planned path at `t`, as a line in the world frame.
+    fn plan(&self, t: f64, path: &[[f64; 2]]) {
+        let ns = self.ns(t);
+        let green = Color {
+            r: 0.1,
+            g: 0.8,
+            b: 0.3,
+            a: 1.0,
+        };
+        let entity = SceneEntity {
+            timestamp: Some(timestamp(ns)),
+            frame_id: "world".to_owned(),
+            id: "plan".to_owned(),
+            lines: vec![LinePrimitive {
+                r#type: foxglove::schemas::line_primitive::Type::LineStrip as i32,
+                thickness: 0.1,
+                points: path
+                    .iter()
+                    .map(|q| Point3 {
+                        x: q[0],
+                        y: q[1],
+                        z: 0.05,
+                    })
+                    .collect(),
+                color: Some(green),
+                ..LinePrimitive::default()
+            }],
+            ..SceneEntity::default()
+        };
+        self.plans.log_with_time(
+            &SceneUpdate {
+                deletions: Vec::new(),
+                entities: vec![entity],
+            },
+            ns,
+        );
     }
 
     /// Hand what was written to the kernel when [`FLUSH_PERIOD`] has passed.
@@ -647,5 +623,177 @@ impl Writer {
                 .get_or_insert_with(|| format!("closing {MCAP_FILE}: {e}"));
         }
         self.files.then(|| self.summary.clone())
+    }
+}
+
+/// When the controller's state is logged (on a change of mode, else every
+/// [`STATE_PERIOD`]) and which of its paths are new.
+#[derive(Debug, Default)]
+struct StateCadence {
+    next_state: f64,
+    last_mode: Option<String>,
+    plans_seen: usize,
+}
+
+impl StateCadence {
+    /// The state to log at `t`, if due, and the paths planned since the last call.
+    fn take(
+        &mut self,
+        t: f64,
+        ctl: &Controller,
+    ) -> (Option<serde_json::Value>, Vec<Vec<[f64; 2]>>) {
+        let mode = serde_json::to_value(ctl.mode()).unwrap_or_default();
+        let mode_text = mode.to_string();
+        let changed = self.last_mode.as_deref() != Some(mode_text.as_str());
+        let state = (changed || t + 1e-9 >= self.next_state).then(|| {
+            self.next_state = t + STATE_PERIOD;
+            let pose = ctl.pose(t).and_then(|p| serde_json::to_value(p).ok());
+            self.last_mode = Some(mode_text);
+            json!({
+                "mode": mode,
+                "changed": changed,
+                "pose": pose,
+                "obstacles": ctl.obstacles(),
+                "stop_reason": ctl.stop_reason(),
+            })
+        });
+        let plans = &ctl.nav.plans;
+        let new = plans
+            .get(self.plans_seen..)
+            .unwrap_or_default()
+            .iter()
+            .map(|p| p.path.clone())
+            .collect();
+        self.plans_seen = plans.len();
+        (state, new)
+    }
+}
+
+/// What the controller's loop hands its [`BackgroundWriter`].
+enum Entry {
+    Nmea(f64, Vec<u8>),
+    Laser(f64, Box<LaserFrame>),
+    Can(f64, KeptFrame),
+    Json(&'static str, f64, serde_json::Value),
+    State(f64, serde_json::Value),
+    Plan(f64, Vec<[f64; 2]>),
+}
+
+/// Entries queued for the [`BackgroundWriter`]'s thread before the loop drops them
+/// (some seconds of a run: a tick hands over a handful).
+const QUEUE: usize = 8192;
+
+/// A [`Writer`] on a thread of its own, for the controller's loop: the loop hands it
+/// owned copies of what crossed its ports and never waits (a full queue drops the
+/// entry and counts it), and the thread encodes and writes them. Dropped, it finishes
+/// the recording.
+#[derive(Debug)]
+pub struct BackgroundWriter {
+    queue: Option<std::sync::mpsc::SyncSender<Entry>>,
+    thread: Option<std::thread::JoinHandle<Option<RecordSummary>>>,
+    cadence: StateCadence,
+    dropped: u64,
+}
+
+impl BackgroundWriter {
+    /// Start the thread that writes into `writer`.
+    pub fn spawn(mut writer: Writer) -> std::io::Result<BackgroundWriter> {
+        let (queue, entries) = std::sync::mpsc::sync_channel::<Entry>(QUEUE);
+        let thread = std::thread::Builder::new()
+            .name("recorder".to_owned())
+            .spawn(move || {
+                loop {
+                    match entries.recv_timeout(FLUSH_PERIOD) {
+                        Ok(entry) => writer.write(entry),
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+                    }
+                    writer.maybe_flush();
+                }
+                writer.finish()
+            })?;
+        Ok(BackgroundWriter {
+            queue: Some(queue),
+            thread: Some(thread),
+            cadence: StateCadence::default(),
+            dropped: 0,
+        })
+    }
+
+    fn send(&mut self, entry: Entry) {
+        if let Some(q) = &self.queue
+            && q.try_send(entry).is_err()
+        {
+            self.dropped += 1;
+        }
+    }
+
+    /// See [`Writer::nmea`].
+    pub fn nmea(&mut self, t: f64, bytes: &[u8]) {
+        if !bytes.is_empty() {
+            self.send(Entry::Nmea(t, bytes.to_vec()));
+        }
+    }
+
+    /// See [`Writer::laser`].
+    pub fn laser(&mut self, t: f64, frame: &LaserFrame) {
+        self.send(Entry::Laser(t, Box::new(*frame)));
+    }
+
+    /// A frame the controller's port handed out or sent at `t`.
+    pub fn can(&mut self, t: f64, frame: KeptFrame) {
+        self.send(Entry::Can(t, frame));
+    }
+
+    /// See [`Writer::log_other`].
+    pub fn log_other(&mut self, topic: &'static str, t: f64, value: serde_json::Value) {
+        self.send(Entry::Json(topic, t, value));
+    }
+
+    /// See [`Writer::controller`].
+    pub fn controller(&mut self, t: f64, ctl: &Controller) {
+        let (state, plans) = self.cadence.take(t, ctl);
+        if let Some(state) = state {
+            self.send(Entry::State(t, state));
+        }
+        for path in plans {
+            self.send(Entry::Plan(t, path));
+        }
+    }
+
+    /// Let the thread write what is queued and close the recording; what it holds.
+    pub fn finish(mut self) -> Option<RecordSummary> {
+        self.close()
+    }
+
+    fn close(&mut self) -> Option<RecordSummary> {
+        self.queue = None;
+        let mut summary = self.thread.take()?.join().ok().flatten()?;
+        if self.dropped > 0 {
+            summary.error.get_or_insert(format!(
+                "{} entries dropped: the recorder's queue was full",
+                self.dropped
+            ));
+        }
+        Some(summary)
+    }
+}
+
+impl Drop for BackgroundWriter {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+impl Writer {
+    fn write(&mut self, entry: Entry) {
+        match entry {
+            Entry::Nmea(t, bytes) => self.nmea(t, &bytes),
+            Entry::Laser(t, frame) => self.laser(t, &frame),
+            Entry::Can(t, f) => self.can(t, f.id, f.extended, &f.data, None),
+            Entry::Json(topic, t, value) => self.log_other(topic, t, &value),
+            Entry::State(t, value) => self.log_json(&self.state, t, &value),
+            Entry::Plan(t, path) => self.plan(t, &path),
+        }
     }
 }

@@ -29,7 +29,7 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::core::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
-use crate::record::{RecordSummary, Writer, topics};
+use crate::record::{BackgroundWriter, RecordSummary, Writer, topics};
 use crate::trace::{FixTiming, Trace, TraceWriter};
 
 /// How long a controller that lost a port keeps sending its estop before the loop
@@ -254,8 +254,9 @@ pub struct Runtime<G, L, B> {
     next_heartbeat: f64,
     trace: Option<TraceWriter>,
     trace_error: Option<String>,
-    /// The controller's own recording (`run --log`), when made.
-    recorder: Option<Writer>,
+    /// The controller's own recording (`run --log`), when made: written on a thread
+    /// of its own.
+    recorder: Option<BackgroundWriter>,
     /// Fix timings on the monotonic clock (the binary on the wires), when kept.
     fix_timing: Option<Vec<FixTiming>>,
     unanswered: Vec<(f64, u64)>,
@@ -307,21 +308,25 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
 
     /// Record what crosses the ports into `writer` as the loop goes (the controller's
     /// own recording, [`crate::record`]): each input at the tick that took it, each
-    /// frame sent, the ticks the replannings were taken at and the ticks skipped.
-    pub fn with_recorder(mut self, writer: Writer) -> Self {
-        self.record_into(writer);
-        self
+    /// frame sent, the ticks the replannings were taken at and the ticks skipped. The
+    /// loop hands copies to a thread that encodes and writes them
+    /// ([`BackgroundWriter`]); an error starting it is returned.
+    pub fn with_recorder(mut self, writer: Writer) -> std::io::Result<Self> {
+        self.record_into(writer)?;
+        Ok(self)
     }
 
     /// [`Runtime::with_recorder`] on a running loop, from its next tick.
-    pub fn record_into(&mut self, writer: Writer) {
+    pub fn record_into(&mut self, writer: Writer) -> std::io::Result<()> {
+        self.recorder = Some(BackgroundWriter::spawn(writer)?);
         self.can.keep_frames();
-        self.recorder = Some(writer);
+        Ok(())
     }
 
-    /// Close the recording; what it holds (none without one).
+    /// Close the recording, once what is queued is written; what it holds (none
+    /// without one).
     pub fn finish_recording(&mut self) -> Option<RecordSummary> {
-        self.recorder.take().and_then(Writer::finish)
+        self.recorder.take().and_then(BackgroundWriter::finish)
     }
 
     /// Stamp each fix's read and the first steering command after it on the
@@ -360,7 +365,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
     pub fn request_stop(&mut self, now: f64) {
         if self.closing.is_none() {
             if let Some(w) = &mut self.recorder {
-                w.log_other(topics::CONTROLLER_STOP, now, &json!({ "requested": true }));
+                w.log_other(topics::CONTROLLER_STOP, now, json!({ "requested": true }));
             }
             let exit = if matches!(self.ctl.mode(), Mode::Estop { .. }) {
                 Exit::StoppedInEstop
@@ -477,14 +482,13 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             return;
         };
         for f in self.can.take_frames() {
-            w.can(now, f.id, f.extended, &f.data, None);
+            w.can(now, f);
         }
         let taken = self.ctl.plans_taken();
         if taken != plans_taken {
-            w.log_other(topics::CONTROLLER_PLANNING, now, &json!({ "taken": taken }));
+            w.log_other(topics::CONTROLLER_PLANNING, now, json!({ "taken": taken }));
         }
         w.controller(now, &self.ctl);
-        w.maybe_flush();
     }
 
     fn send(&mut self, m: &GolfCarMessage) -> Result<(), BridgeError> {
@@ -591,11 +595,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                 let missed = missed as u64;
                 if let Some(w) = &mut self.recorder {
                     let from = k as f64 * COMMAND_PERIOD;
-                    w.log_other(
-                        topics::CONTROLLER_SKIPPED,
-                        from,
-                        &json!({ "ticks": missed }),
-                    );
+                    w.log_other(topics::CONTROLLER_SKIPPED, from, json!({ "ticks": missed }));
                 }
                 self.skipped_ticks += missed;
                 k += missed;
@@ -666,7 +666,8 @@ mod tests {
             MemLaser::default(),
             CanPort::new(bus.endpoint(), "mem"),
         )
-        .with_recorder(writer);
+        .with_recorder(writer)
+        .expect("the recorder's thread");
         let mut clock = StallingClock {
             at: 5,
             late: 0.105,

@@ -36,13 +36,18 @@ fn run(record: bool) -> anyhow::Result<(f64, f64, u64)> {
         false => None,
     };
     let start = Instant::now();
+    let mut failed = None;
     let run = run_sil_with(sc, &cfg, |_, rt| {
         if let Some(w) = writer.take() {
-            rt.record_into(w);
+            failed = rt.record_into(w).err();
         }
         Hook::Continue
     })?;
-    // The recording is closed when the run's controller is dropped, inside.
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
+    // The recording was closed when the run's controller was dropped, inside (its
+    // thread writes what is queued first).
     let wall = start.elapsed().as_secs_f64();
     let size = std::fs::metadata(dir.path().join(MCAP_FILE)).map_or(0, |m| m.len());
     Ok((wall, run.sim.time(), size))

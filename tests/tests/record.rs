@@ -272,7 +272,7 @@ fn the_controllers_own_recording_replays_byte_for_byte_despite_its_planning_thre
     let run = run_sil_with(sc, &cfg, |_, rt| {
         if let Some(w) = writer.take() {
             rt.controller_mut().start_planning_thread().unwrap();
-            rt.record_into(w);
+            rt.record_into(w).unwrap();
         }
         Hook::Continue
     })

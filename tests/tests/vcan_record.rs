@@ -18,7 +18,7 @@ use ugv_controller::config::FollowerKind;
 use ugv_e2e_tests::{TestVcan, can_utils, mcap_summary, replay_hil_recording, workspace_bin};
 use ugv_sim::Scenario;
 use ugv_sim::mission::controller_config;
-use ugv_sim::record::{BUS_LOG, MCAP_FILE, topics};
+use ugv_sim::record::{BUS_LOG, CONTROLLER_LOG_DIR, MCAP_FILE, topics};
 use ugv_sim::sil::{Hook, run_sil_recorded};
 
 /// `ID#DATA` of each candump line in `text`.
@@ -90,7 +90,8 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
     let vcan = TestVcan::new("hrec")?;
     let dir = tempfile::tempdir()?;
     let results = dir.path().join("results");
-    let own = dir.path().join("controller-log");
+    // The controller's own recording beside the simulator's.
+    let own = results.join(CONTROLLER_LOG_DIR);
     let run_id = format!("rec-{}", std::process::id());
     let started = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?;
     let out = Command::new(workspace_bin("ugv-sim")?)
@@ -101,9 +102,6 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
         .arg(&results)
         .arg("--gps-link")
         .arg(dir.path().join("gps"))
-        // The controller's own recording beside the simulator's.
-        .args(["--controller-arg", "--log", "--controller-arg"])
-        .arg(&own)
         .output()
         .context("running ugv-sim")?;
     let stderr = String::from_utf8_lossy(&out.stderr);

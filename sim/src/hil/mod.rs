@@ -385,11 +385,17 @@ pub fn run_scenario(
                 binary.display(),
                 config_path.display()
             ));
+            // Recorded, the controller records its own ports too (README: "The
+            // controller's own recording").
+            let log = options
+                .record
+                .then(|| options.results.join(crate::record::CONTROLLER_LOG_DIR));
             Some(spawn_controller(
                 binary,
                 &config_path,
                 &wires.map,
                 &trace_path,
+                log.as_deref(),
                 &options.controller_args,
             )?)
         }

@@ -52,14 +52,23 @@ pub struct ControllerProcess {
 }
 
 /// Start `binary run --config CONFIG --gps LINK --baud BAUD --laser SERVICE --can IFACE
-/// --trace TRACE [extra...]` (the controller contract, README).
+/// --trace TRACE [--log LOG] [extra...]` (the controller contract, README). `log` is
+/// left out when `extra` names a `--log` of its own.
 pub fn spawn_controller(
     binary: &Path,
     config: &Path,
     wires: &WireMap,
     trace: &Path,
+    log: Option<&Path>,
     extra: &[String],
 ) -> Result<ControllerProcess, HilError> {
+    let own_log = extra
+        .iter()
+        .any(|a| a == "--log" || a.starts_with("--log="));
+    let log: Vec<&std::ffi::OsStr> = match log {
+        Some(dir) if !own_log => vec!["--log".as_ref(), dir.as_os_str()],
+        _ => Vec::new(),
+    };
     let child = Command::new(binary)
         .arg("run")
         .arg("--config")
@@ -76,6 +85,7 @@ pub fn spawn_controller(
         ])
         .arg("--trace")
         .arg(trace)
+        .args(log)
         .args(extra)
         .stdin(Stdio::null())
         .spawn()

@@ -59,6 +59,10 @@ pub use ugv_controller::record::{
     RecordError, RecordMode, RecordSummary, RunInfo, describe, direction, timestamp, topics,
 };
 
+/// The directory under a HIL run's results where the controller `ugv-sim run` starts
+/// records its own ports (`ugv-controller run --log`).
+pub const CONTROLLER_LOG_DIR: &str = "controller";
+
 /// Seconds between two vehicle poses (the physics may run faster).
 const POSE_PERIOD: f64 = 0.02;
 /// Seconds between two obstacle scenes when something moves (else one a second, for
