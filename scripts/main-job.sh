@@ -3,7 +3,9 @@
 # paper's scenario end to end in HIL. ugv-sim simulates the golf car, its RTK GPS
 # (NMEA on a pty), its laser scanner (frames over iceoryx2) and its steering and
 # throttle ECUs (SocketCAN vcan0, golf_car.dbc); the real ugv-controller binary runs
-# as a separate process on those wires. The verdict and the figure go to results/.
+# as a separate process on those wires, recording its own ports (results/paper-hil/
+# controller, which `ugv-sim replay` replays byte for byte). The verdict and the figure
+# go to results/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=target/release
@@ -11,7 +13,7 @@ out=results/paper-hil
 mkdir -p "$out"
 
 set +e
-"$bin/ugv-sim" run --controller "$bin/ugv-controller" --results "$out" --status-every 2 >"$out/stdout.json"
+"$bin/ugv-sim" run --controller "$bin/ugv-controller" --controller-log --results "$out" --status-every 2 >"$out/stdout.json"
 code=$?
 set -e
 echo "== verdict ($out/verdict.json, figure $out/figure.png)"

@@ -192,6 +192,12 @@ struct RunArgs {
     /// Extra arguments for the controller binary (repeatable).
     #[arg(long = "controller-arg", allow_hyphen_values = true)]
     controller_args: Vec<String>,
+    /// Have the controller started with --controller record its own ports into
+    /// RESULTS/controller (`ugv-controller run --log`), a recording that replays byte
+    /// for byte; off by default, since it adds the controller's share of encoding and
+    /// writing to the machine.
+    #[arg(long, requires = "controller")]
+    controller_log: bool,
     /// The follower the controller uses (written into its configuration).
     #[arg(long, value_enum, default_value_t = FollowerKind::Optimal)]
     follower: FollowerKind,
@@ -566,6 +572,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         results: args.results.clone(),
         status_every: args.status_every,
         record: !args.no_record,
+        controller_log: args.controller_log,
         live,
         rt_priority: args.rt_priority,
     };
@@ -685,6 +692,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             results: results.join(&slug),
             status_every: 1.0,
             record,
+            controller_log: false,
             live: None,
             rt_priority: realtime::DEFAULT_PRIORITY,
         };

@@ -102,6 +102,7 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
         .arg(&results)
         .arg("--gps-link")
         .arg(dir.path().join("gps"))
+        .arg("--controller-log")
         .output()
         .context("running ugv-sim")?;
     let stderr = String::from_utf8_lossy(&out.stderr);

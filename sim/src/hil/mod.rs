@@ -297,6 +297,9 @@ pub struct HilOptions {
     pub isolate: Option<String>,
     /// Record the run into `results` (see [`crate::record`]).
     pub record: bool,
+    /// Have the controller started here record its own ports into
+    /// `results`/[`CONTROLLER_LOG_DIR`](crate::record::CONTROLLER_LOG_DIR).
+    pub controller_log: bool,
     /// Serve the run's channels on this live view (see [`crate::record::live`]); start
     /// it before [`Endpoints::open`], which may enter a private network namespace.
     pub live: Option<Arc<LiveView>>,
@@ -385,10 +388,9 @@ pub fn run_scenario(
                 binary.display(),
                 config_path.display()
             ));
-            // Recorded, the controller records its own ports too (README: "The
-            // controller's own recording").
+            // README: "The controller's own recording".
             let log = options
-                .record
+                .controller_log
                 .then(|| options.results.join(crate::record::CONTROLLER_LOG_DIR));
             Some(spawn_controller(
                 binary,

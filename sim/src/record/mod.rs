@@ -59,8 +59,8 @@ pub use ugv_controller::record::{
     RecordError, RecordMode, RecordSummary, RunInfo, describe, direction, timestamp, topics,
 };
 
-/// The directory under a HIL run's results where the controller `ugv-sim run` starts
-/// records its own ports (`ugv-controller run --log`).
+/// The directory under a HIL run's results where the controller `ugv-sim run
+/// --controller-log` starts records its own ports (`ugv-controller run --log`).
 pub const CONTROLLER_LOG_DIR: &str = "controller";
 
 /// Seconds between two vehicle poses (the physics may run faster).
