@@ -173,8 +173,6 @@ pub struct Controller {
     fault_detail: u16,
     /// Commands the controller did not send, watched for on the bus.
     watch: ActuationWatch,
-    /// Replannings taken (their outcomes handed to the navigator).
-    plans_taken: u64,
     pub samples: Vec<Sample>,
 }
 
@@ -207,7 +205,6 @@ impl Controller {
             fault_code: FaultReportCode::Internal,
             fault_detail: 0,
             watch: ActuationWatch::new(),
-            plans_taken: 0,
             samples: Vec::new(),
         })
     }
@@ -245,11 +242,6 @@ impl Controller {
         self
     }
 
-    /// How many replannings the controller has taken so far.
-    pub fn plans_taken(&self) -> u64 {
-        self.plans_taken
-    }
-
     /// Start a replanning when one is due and take the finished ones.
     fn plan(&mut self, now: f64, pose: &Pose) {
         match &mut self.planning {
@@ -258,13 +250,11 @@ impl Controller {
                     self.nav.issued(now);
                     let outcome = solve(&self.nav.request(now, pose, &self.obstacles));
                     self.nav.accept(outcome);
-                    self.plans_taken += 1;
                 }
             }
             Planning::NextTick(done) => {
                 if let Some(outcome) = done.take() {
                     self.nav.accept(*outcome);
-                    self.plans_taken += 1;
                 }
                 if self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
@@ -279,7 +269,6 @@ impl Controller {
                 while let Ok(outcome) = w.outcomes.try_recv() {
                     self.nav.accept(outcome);
                     w.in_flight = false;
-                    self.plans_taken += 1;
                 }
                 if !w.in_flight && self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
@@ -290,12 +279,11 @@ impl Controller {
                 }
             }
             Planning::Recorded { taken_at, waiting } => {
-                if waiting.is_some() && taken_at.front().is_some_and(|t| *t <= now + 1e-6) {
+                if taken_at.front().is_some_and(|t| *t <= now + 1e-6)
+                    && let Some(outcome) = waiting.take()
+                {
                     taken_at.pop_front();
-                    if let Some(outcome) = waiting.take() {
-                        self.nav.accept(*outcome);
-                        self.plans_taken += 1;
-                    }
+                    self.nav.accept(*outcome);
                 }
                 if waiting.is_none() && self.nav.replan_due(now, pose) {
                     self.nav.issued(now);

@@ -28,7 +28,7 @@ use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
-use ugv_controller::record::{RecordMode, RunInfo, Writer};
+use ugv_controller::record::{RunInfo, Writer};
 use ugv_controller::runtime::Runtime;
 use ugv_controller::trace::TraceWriter;
 
@@ -278,20 +278,18 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     if let Some(dir) = &args.log {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("--log: creating {}", dir.display()))?;
-        let info = RunInfo {
-            mode: RecordMode::Field,
-            scenario: args.config.as_ref().map_or_else(
+        let info = RunInfo::field(
+            args.config.as_ref().map_or_else(
                 || "the paper's mission (default configuration)".to_owned(),
                 |p| p.display().to_string(),
             ),
-            physics_hz: 1.0 / COMMAND_PERIOD,
             // The loop's t = 0: its clock starts below.
-            epoch_unix_ns: firmware_bridge::clock::unix_ns(std::time::SystemTime::now()),
-            can_interface: args.can.clone(),
-            gps_sentences: ReaderConfig::default().complete_when,
-            gps_baud: args.baud,
-            controller_toml: toml::to_string_pretty(&cfg)?,
-        };
+            firmware_bridge::clock::unix_ns(std::time::SystemTime::now()),
+            args.can.clone(),
+            ReaderConfig::default().complete_when,
+            args.baud,
+            &cfg,
+        )?;
         let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
             .with_context(|| format!("--log: recording into {}", dir.display()))?;
         rt = rt

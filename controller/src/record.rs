@@ -16,7 +16,7 @@
 //! by a streaming reader). A write error stops the recording, not the run.
 //!
 //! The controller's own recording ([`RecordMode::Field`]) is made at its loop's seam
-//! ([`crate::runtime::Runtime::with_recorder`]): every input at the tick that took it,
+//! (the runtime's `Runtime::with_recorder`): every input at the tick that took it,
 //! every frame it sent, the ticks at which it took its replannings from the planning
 //! thread, the ticks it skipped and the one it was asked to stop at, on its clock (log time = the wall clock at its
 //! start + its time). A replay feeds the same inputs at the same ticks into the same
@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use firmware_bridge::can::KeptFrame;
+use firmware_bridge::can::TapFrame;
 use firmware_bridge::clock::unix_ns;
 use firmware_bridge::laser::LaserFrame;
 use foxglove::schemas::{
@@ -43,7 +43,7 @@ use golf_car_can::spec::NetworkSpec;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::core::Controller;
+use crate::core::{Controller, Mode};
 
 /// The recording's file names in its directory.
 pub const MCAP_FILE: &str = "run.mcap";
@@ -138,6 +138,29 @@ pub const RUN_METADATA: &str = "ugv-hil run";
 pub const CONFIG_ATTACHMENT: &str = "controller.toml";
 
 impl RunInfo {
+    /// The controller's own recording's: `label` names the run (its configuration
+    /// file), `epoch_unix_ns` is the wall clock at its loop's t = 0, the GPS line is read
+    /// for `gps_sentences` at `gps_baud`, and `cfg` is attached.
+    pub fn field(
+        label: String,
+        epoch_unix_ns: u64,
+        can_interface: String,
+        gps_sentences: firmware_bridge::nmea::SentenceSet,
+        gps_baud: u32,
+        cfg: &crate::config::ControllerConfig,
+    ) -> Result<RunInfo, toml::ser::Error> {
+        Ok(RunInfo {
+            mode: RecordMode::Field,
+            scenario: label,
+            physics_hz: 1.0 / crate::core::COMMAND_PERIOD,
+            epoch_unix_ns,
+            can_interface,
+            gps_sentences,
+            gps_baud,
+            controller_toml: toml::to_string_pretty(cfg)?,
+        })
+    }
+
     /// As the MCAP metadata record: each field as JSON text.
     fn metadata(&self) -> BTreeMap<String, String> {
         match serde_json::to_value(self) {
@@ -493,14 +516,14 @@ impl Writer {
 
     /// One CAN frame on the bus at `t`, with the kernel's receive time when known
     /// (bus.log then carries it, and `/can/raw` as `wall_unix_ns`).
-    pub fn can(
-        &mut self,
-        t: f64,
-        id: u32,
-        extended: bool,
-        data: &[u8],
-        kernel: Option<SystemTime>,
-    ) {
+    pub fn can(&mut self, t: f64, f: &TapFrame) {
+        let TapFrame {
+            id,
+            extended,
+            data,
+            kernel,
+        } = f;
+        let (id, extended) = (*id, *extended);
         let ns = self.ns(t);
         let stamp = kernel.map_or(ns, unix_ns);
         let compact = Compact { id, extended, data };
@@ -521,7 +544,7 @@ impl Writer {
             "direction": direction(&self.spec, id),
         });
         if let Some(k) = kernel {
-            raw["wall_unix_ns"] = unix_ns(k).into();
+            raw["wall_unix_ns"] = unix_ns(*k).into();
         }
         self.log_json(&self.can_raw, t, &raw);
         let message = (!extended)
@@ -631,7 +654,7 @@ impl Writer {
 #[derive(Debug, Default)]
 struct StateCadence {
     next_state: f64,
-    last_mode: Option<String>,
+    last_mode: Option<Mode>,
     plans_seen: usize,
 }
 
@@ -642,17 +665,14 @@ impl StateCadence {
         t: f64,
         ctl: &Controller,
     ) -> (Option<serde_json::Value>, Vec<Vec<[f64; 2]>>) {
-        let mode = serde_json::to_value(ctl.mode()).unwrap_or_default();
-        let mode_text = mode.to_string();
-        let changed = self.last_mode.as_deref() != Some(mode_text.as_str());
+        let changed = self.last_mode.as_ref() != Some(ctl.mode());
         let state = (changed || t + 1e-9 >= self.next_state).then(|| {
             self.next_state = t + STATE_PERIOD;
-            let pose = ctl.pose(t).and_then(|p| serde_json::to_value(p).ok());
-            self.last_mode = Some(mode_text);
+            self.last_mode = Some(ctl.mode().clone());
             json!({
-                "mode": mode,
+                "mode": ctl.mode(),
                 "changed": changed,
-                "pose": pose,
+                "pose": ctl.pose(t),
                 "obstacles": ctl.obstacles(),
                 "stop_reason": ctl.stop_reason(),
             })
@@ -673,7 +693,7 @@ impl StateCadence {
 enum Entry {
     Nmea(f64, Vec<u8>),
     Laser(f64, Box<LaserFrame>),
-    Can(f64, KeptFrame),
+    Can(f64, TapFrame),
     Json(&'static str, f64, serde_json::Value),
     State(f64, serde_json::Value),
     Plan(f64, Vec<[f64; 2]>),
@@ -741,7 +761,7 @@ impl BackgroundWriter {
     }
 
     /// A frame the controller's port handed out or sent at `t`.
-    pub fn can(&mut self, t: f64, frame: KeptFrame) {
+    pub fn can(&mut self, t: f64, frame: TapFrame) {
         self.send(Entry::Can(t, frame));
     }
 
@@ -790,7 +810,7 @@ impl Writer {
         match entry {
             Entry::Nmea(t, bytes) => self.nmea(t, &bytes),
             Entry::Laser(t, frame) => self.laser(t, &frame),
-            Entry::Can(t, f) => self.can(t, f.id, f.extended, &f.data, None),
+            Entry::Can(t, f) => self.can(t, &f),
             Entry::Json(topic, t, value) => self.log_other(topic, t, &value),
             Entry::State(t, value) => self.log_json(&self.state, t, &value),
             Entry::Plan(t, path) => self.plan(t, &path),

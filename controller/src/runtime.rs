@@ -477,15 +477,15 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
     }
 
     /// The tick's frames and the controller after it onto the recording.
-    fn record_tick(&mut self, now: f64, plans_taken: u64) {
+    fn record_tick(&mut self, now: f64, accepted_before: u64) {
         let Some(w) = &mut self.recorder else {
             return;
         };
         for f in self.can.take_frames() {
             w.can(now, f);
         }
-        let taken = self.ctl.plans_taken();
-        if taken != plans_taken {
+        let taken = self.ctl.nav.accepted();
+        if taken != accepted_before {
             w.log_other(topics::CONTROLLER_PLANNING, now, json!({ "taken": taken }));
         }
         w.controller(now, &self.ctl);
@@ -540,7 +540,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             self.write_trace(now, true);
             return Some(exit);
         }
-        let plans_taken = self.ctl.plans_taken();
+        let accepted_before = self.ctl.nav.accepted();
         self.read_inputs(now);
         let messages = self.ctl.tick(now);
         let heartbeats_only = self.closing.as_ref().is_some_and(|c| c.heartbeats_only);
@@ -558,7 +558,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             messages
         };
         let sent = out.iter().try_for_each(|m| self.send(m));
-        self.record_tick(now, plans_taken);
+        self.record_tick(now, accepted_before);
         if let Err(e) = sent {
             self.write_trace(now, true);
             return Some(Exit::CanLost {
@@ -648,20 +648,20 @@ mod tests {
     fn a_tick_that_comes_late_skips_the_ticks_it_missed() {
         let bus = MemBus::new();
         let dir = tempfile::tempdir().expect("tempdir");
-        let info = crate::record::RunInfo {
-            mode: crate::record::RecordMode::Field,
-            scenario: "stalling clock".to_owned(),
-            physics_hz: 1.0 / COMMAND_PERIOD,
-            epoch_unix_ns: 1_000_000_000,
-            can_interface: "mem".to_owned(),
-            gps_sentences: ReaderConfig::default().complete_when,
-            gps_baud: 115_200,
-            controller_toml: String::new(),
-        };
+        let cfg = ControllerConfig::default();
+        let info = crate::record::RunInfo::field(
+            "stalling clock".to_owned(),
+            1_000_000_000,
+            "mem".to_owned(),
+            ReaderConfig::default().complete_when,
+            115_200,
+            &cfg,
+        )
+        .expect("run info");
         let writer =
             Writer::create(Some(dir.path()), foxglove::Context::new(), info).expect("recorder");
         let mut rt = Runtime::new(
-            Controller::new(&ControllerConfig::default()).expect("controller"),
+            Controller::new(&cfg).expect("controller"),
             MemGps::new(ReaderConfig::default()),
             MemLaser::default(),
             CanPort::new(bus.endpoint(), "mem"),

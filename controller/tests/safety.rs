@@ -241,10 +241,10 @@ fn replannings_are_taken_at_the_recorded_ticks() {
     rig.run(0.0, 0.24, ALL);
     assert!(rig.ctl.nav.plans.is_empty(), "the first waits for 0.25 s");
     rig.run(0.24, 0.59, ALL);
-    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.plans_taken()), (1, 1));
+    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.nav.accepted()), (1, 1));
     rig.run(0.59, 1.5, ALL);
     // The third was asked for but the recording took no more.
-    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.plans_taken()), (2, 2));
+    assert_eq!((rig.ctl.nav.plans.len(), rig.ctl.nav.accepted()), (2, 2));
     assert_eq!(
         rig.ctl.nav.plans[0].time, 0.0,
         "asked for at the first tick"

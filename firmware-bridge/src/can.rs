@@ -75,17 +75,38 @@ pub struct CanPort<B = CanSocket> {
     /// Frames received but not handed out (not among `heard`).
     overheard: u64,
     /// Every frame handed out and sent, kept for a recorder ([`CanPort::keep_frames`]).
-    kept: Option<Vec<KeptFrame>>,
+    kept: Option<Vec<TapFrame>>,
 }
 
-/// A frame a [`CanPort`] received (and handed out) or sent, as it was on the bus.
+/// A CAN frame as a recorder logs it: a simulator's tap on the bus, or a
+/// [`CanPort`] keeping what it handed out and sent.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct KeptFrame {
+pub struct TapFrame {
     pub id: u32,
     pub extended: bool,
     pub data: Vec<u8>,
-    /// Sent by this port (else received).
-    pub sent: bool,
+    /// The kernel's receive time, when known (a tap's socket, in HIL).
+    pub kernel: Option<std::time::SystemTime>,
+}
+
+impl TapFrame {
+    pub fn of<F: Frame>(frame: &F, kernel: Option<std::time::SystemTime>) -> TapFrame {
+        let (id, extended) = raw_id(frame.id());
+        TapFrame {
+            id,
+            extended,
+            data: frame.data().to_vec(),
+            kernel,
+        }
+    }
+}
+
+/// The raw value of a CAN ID and whether it is an extended (29-bit) one.
+fn raw_id(id: Id) -> (u32, bool) {
+    match id {
+        Id::Standard(id) => (u32::from(id.as_raw()), false),
+        Id::Extended(id) => (id.as_raw(), true),
+    }
 }
 
 impl<B> CanPort<B>
@@ -114,7 +135,7 @@ where
     }
 
     /// The frames kept since the last call (none unless [`CanPort::keep_frames`]).
-    pub fn take_frames(&mut self) -> Vec<KeptFrame> {
+    pub fn take_frames(&mut self) -> Vec<TapFrame> {
         self.kept.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
@@ -192,12 +213,7 @@ where
             match self.bus.transmit(&frame) {
                 Ok(_) => {
                     if let Some(kept) = &mut self.kept {
-                        kept.push(KeptFrame {
-                            id: u32::from(id),
-                            extended: false,
-                            data: data.to_vec(),
-                            sent: true,
-                        });
+                        kept.push(TapFrame::of(&frame, None));
                     }
                     return Ok(());
                 }
@@ -236,17 +252,9 @@ where
     }
 
     fn classify(&mut self, frame: &B::Frame) -> Received {
-        let (id, extended) = match frame.id() {
-            Id::Standard(id) => (u32::from(id.as_raw()), false),
-            Id::Extended(id) => (id.as_raw(), true),
-        };
+        let (id, extended) = raw_id(frame.id());
         if let Some(kept) = &mut self.kept {
-            kept.push(KeptFrame {
-                id,
-                extended,
-                data: frame.data().to_vec(),
-                sent: false,
-            });
+            kept.push(TapFrame::of(frame, None));
         }
         match self
             .rx

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use ugv_controller::config::FollowerKind;
 use ugv_controller::core::COMMAND_PERIOD;
-use ugv_controller::record::{MCAP_FILE, RecordMode, RunInfo, Writer};
+use ugv_controller::record::{MCAP_FILE, RunInfo, Writer};
 use ugv_sim::mission::controller_config;
 use ugv_sim::scenario::Scenario;
 use ugv_sim::sil::{Hook, run_sil_with};
@@ -22,16 +22,14 @@ fn run(record: bool) -> anyhow::Result<(f64, f64, u64)> {
         true => Some(Writer::create(
             Some(dir.path()),
             foxglove::Context::new(),
-            RunInfo {
-                mode: RecordMode::Field,
-                scenario: sc.name.clone(),
-                physics_hz: 1.0 / COMMAND_PERIOD,
-                epoch_unix_ns: sc.sim.epoch.unix_ns(),
-                can_interface: sc.can.interface.clone(),
-                gps_sentences: sc.gps.sentence_set(),
-                gps_baud: sc.gps.baud,
-                controller_toml: toml::to_string_pretty(&cfg)?,
-            },
+            RunInfo::field(
+                sc.name.clone(),
+                sc.sim.epoch.unix_ns(),
+                sc.can.interface.clone(),
+                sc.gps.sentence_set(),
+                sc.gps.baud,
+                &cfg,
+            )?,
         )?),
         false => None,
     };

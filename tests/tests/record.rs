@@ -255,16 +255,15 @@ fn the_controllers_own_recording_replays_byte_for_byte_despite_its_planning_thre
     let dir = tempfile::tempdir().unwrap();
     let sc = Scenario::paper().unwrap();
     let cfg = controller_config(&sc, FollowerKind::Optimal);
-    let info = RunInfo {
-        mode: RecordMode::Field,
-        scenario: "the paper's scenario, SIL with the planning thread".to_owned(),
-        physics_hz: 1.0 / ugv_controller::core::COMMAND_PERIOD,
-        epoch_unix_ns: sc.sim.epoch.unix_ns(),
-        can_interface: "can0".to_owned(),
-        gps_sentences: sc.gps.sentence_set(),
-        gps_baud: sc.gps.baud,
-        controller_toml: toml::to_string_pretty(&cfg).unwrap(),
-    };
+    let info = RunInfo::field(
+        "the paper's scenario, SIL with the planning thread".to_owned(),
+        sc.sim.epoch.unix_ns(),
+        "can0".to_owned(),
+        sc.gps.sentence_set(),
+        sc.gps.baud,
+        &cfg,
+    )
+    .unwrap();
     let mut writer = Some(
         ugv_controller::record::Writer::create(Some(dir.path()), foxglove::Context::new(), info)
             .unwrap(),

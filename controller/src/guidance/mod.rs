@@ -185,6 +185,8 @@ pub struct Navigator {
     reversed_at: f64,
     /// The last try at recovery found no clear way back.
     no_way_back: bool,
+    /// Replannings taken ([`Navigator::accept`]), dropped ones included.
+    accepted: u64,
     pub plans: Vec<PlanRecord>,
 }
 
@@ -214,6 +216,7 @@ impl Navigator {
             recent_reversals: 0,
             reversed_at: 0.0,
             no_way_back: false,
+            accepted: 0,
             plans: Vec::new(),
         })
     }
@@ -552,6 +555,11 @@ impl Navigator {
     }
 
     /// A replanning was issued at `now`: the next is due one T_s later.
+    /// How many replannings have been taken so far, dropped ones included.
+    pub fn accepted(&self) -> u64 {
+        self.accepted
+    }
+
     pub fn issued(&mut self, now: f64) {
         self.next_replan = now + self.cfg.planner.replan_period_s;
     }
@@ -560,6 +568,7 @@ impl Navigator {
     /// while the car reverses (on a planning thread) was planned from where it stood,
     /// and is dropped.
     pub fn accept(&mut self, outcome: PlanOutcome) {
+        self.accepted += 1;
         if self.reversing.is_some() {
             return;
         }

@@ -221,7 +221,7 @@ impl Recorder {
 
     /// One CAN frame seen on the bus at simulated time `t`.
     fn can(&mut self, t: f64, f: &TapFrame) {
-        self.w.can(t, f.id, f.extended, &f.data, f.kernel);
+        self.w.can(t, f);
     }
 
     /// The car, the obstacles, and the controller (when in-process) at time `t`.

@@ -3,28 +3,9 @@
 //! In SIL a memory-bus endpoint; in HIL a CAN socket on the interface with kernel
 //! receive timestamps (`SO_TIMESTAMPNS`), as candump takes them.
 
-use std::time::SystemTime;
-
-use embedded_can::Frame;
 use firmware_bridge::can::QueueDrops;
-use socketcan::{CanSocket, EmbeddedFrame, Socket, SocketOptions};
-
-/// One frame as the tap saw it.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct TapFrame {
-    pub id: u32,
-    pub extended: bool,
-    pub data: Vec<u8>,
-    /// The kernel's receive time (HIL).
-    pub kernel: Option<SystemTime>,
-}
-
-fn id_of(id: embedded_can::Id) -> (u32, bool) {
-    match id {
-        embedded_can::Id::Standard(s) => (u32::from(s.as_raw()), false),
-        embedded_can::Id::Extended(e) => (e.as_raw(), true),
-    }
-}
+pub use firmware_bridge::can::TapFrame;
+use socketcan::{CanSocket, Socket, SocketOptions};
 
 /// Takes what arrived since the last call, never blocking; its queue drops are the
 /// frames the recording lacks.
@@ -36,13 +17,7 @@ impl BusTap for firmware_bridge::can::membus::MemEndpoint {
     fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()> {
         use embedded_can::nb::Can;
         while let Ok(f) = self.receive() {
-            let (id, extended) = id_of(f.id());
-            into.push(TapFrame {
-                id,
-                extended,
-                data: f.data().to_vec(),
-                kernel: None,
-            });
+            into.push(TapFrame::of(&f, None));
         }
         Ok(())
     }
@@ -70,15 +45,7 @@ impl BusTap for SocketTap {
     fn drain(&mut self, into: &mut Vec<TapFrame>) -> std::io::Result<()> {
         loop {
             match self.socket.read_frame_with_timestamp() {
-                Ok((f, at)) => {
-                    let (id, extended) = id_of(EmbeddedFrame::id(&f));
-                    into.push(TapFrame {
-                        id,
-                        extended,
-                        data: EmbeddedFrame::data(&f).to_vec(),
-                        kernel: Some(at),
-                    });
-                }
+                Ok((f, at)) => into.push(TapFrame::of(&f, Some(at))),
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(()),
                 Err(e) => return Err(e),
             }
