@@ -6,10 +6,12 @@
 # passed on a retry (FLAKY), failed, and the frames the guest's input backlog dropped
 # (runs.txt). Everything is left in results/vcan-load/.
 #
-#   bash scripts/vcan-load-check.sh [RUNS] [HOST_NICE] [HOG]
+#   bash scripts/vcan-load-check.sh [RUNS] [HOST_NICE] [HOG] [HOST_RT]
 #
 # RUNS defaults to 10; HOST_NICE (QEMU's niceness on the host, vcan-setup vm
-# --host-nice) to its default -10; HOG=0 runs without the hog, for the comparison.
+# --host-nice) to its default -10; HOG=0 runs without the hog, for the comparison;
+# HOST_RT (QEMU's SCHED_RR priority on the host, vcan-setup vm --host-rt) to its
+# default 10, 0 for none (QEMU then competes with the hog by its niceness alone).
 # Needs the release binaries (cargo build --workspace --release) and the test
 # binaries built (cargo nextest run --no-run), so the guest compiles nothing.
 set -euo pipefail
@@ -37,6 +39,7 @@ fi
 runs=${1:-10}
 host_nice=${2:--10}
 hog=${3:-1}
+host_rt=${4:-10}
 export UGV_BIN_DIR=${UGV_BIN_DIR:-$PWD/target/release}
 rm -rf "$out"
 mkdir -p "$out"
@@ -47,8 +50,8 @@ if [ "$hog" != 0 ]; then
     done
     trap 'xargs kill <"$out/hog.pids" 2>/dev/null || true' EXIT
 fi
-echo "vcan group x $runs, hog on $(nproc) cores: $hog, QEMU niceness $host_nice" | tee "$out/setup.txt"
-target/debug/vcan-setup vm --host-nice "$host_nice" -- bash scripts/vcan-load-check.sh --in-vm "$runs" |
+echo "vcan group x $runs, hog on $(nproc) cores: $hog, QEMU niceness $host_nice, SCHED_RR $host_rt" | tee "$out/setup.txt"
+target/debug/vcan-setup vm --host-nice "$host_nice" --host-rt "$host_rt" -- bash scripts/vcan-load-check.sh --in-vm "$runs" |
     tee "$out/runs.txt"
 python3 - "$out" "$runs" <<'EOF'
 import re, sys, pathlib

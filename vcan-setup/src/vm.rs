@@ -84,6 +84,15 @@ pub struct VmArgs {
     #[arg(long, default_value_t = -10, allow_hyphen_values = true,
           value_parser = clap::value_parser!(i8).range(-20..=19))]
     pub host_nice: i8,
+    /// The round-robin real-time priority QEMU runs at on the host (SCHED_RR, 1-99;
+    /// 0 leaves it to `--host-nice`). A busy host cannot then take a vCPU away for
+    /// longer than the kernel's real-time throttling allows (50 ms a second while
+    /// the guest keeps its CPUs busy), where a niceness still loses slices to every
+    /// runnable process. Needs root or CAP_SYS_NICE; without, the VM runs at
+    /// `--host-nice` and says so.
+    #[arg(long, default_value_t = 10,
+          value_parser = clap::value_parser!(u8).range(0..=99))]
+    pub host_rt: u8,
     /// The command and its arguments.
     #[arg(last = true, required = true, value_name = "CMD")]
     pub command: Vec<OsString>,
@@ -231,6 +240,36 @@ fn forward(mut from: impl Read + Send + 'static, to_stderr: bool) -> std::thread
     })
 }
 
+/// The SCHED_RR priority to start QEMU at: `None` when asked for none, or when the
+/// host refuses it (no CAP_SYS_NICE, no chrt), which is said on stderr.
+fn host_rt(prio: u8) -> Option<u8> {
+    if prio == 0 {
+        return None;
+    }
+    let probe = Command::new("chrt")
+        .args(["--rr", &prio.to_string(), "true"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .output();
+    match probe {
+        Ok(out) if out.status.success() => Some(prio),
+        Ok(out) => {
+            eprintln!(
+                "vcan-setup: QEMU cannot run at SCHED_RR {prio} on this host ({}); it runs at its niceness",
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+            None
+        }
+        Err(e) => {
+            eprintln!(
+                "vcan-setup: QEMU cannot run at SCHED_RR {prio} on this host (chrt: {e}); it runs at its niceness"
+            );
+            None
+        }
+    }
+}
+
 /// One boot: `Ok(Some(code))` when the guest ran the command, `Ok(None)` when the VM
 /// did not get that far.
 fn boot(
@@ -248,9 +287,16 @@ fn boot(
         what: "locating vcan-setup itself".to_owned(),
         source,
     })?;
-    // Through coreutils' nice, which runs the command even when it may not set
-    // the niceness (and says why).
-    let mut cmd = Command::new("nice");
+    // Through util-linux's chrt when the host lets us, then coreutils' nice, which
+    // runs the command even when it may not set the niceness (and says why).
+    let mut cmd = match host_rt(args.host_rt) {
+        Some(prio) => {
+            let mut c = Command::new("chrt");
+            c.args(["--rr", &prio.to_string(), "nice"]);
+            c
+        }
+        None => Command::new("nice"),
+    };
     cmd.args(["-n", &args.host_nice.to_string()]).arg(vng);
     cmd.arg("--run").arg(kernel);
     if !kvm {
@@ -300,7 +346,7 @@ fn boot(
     // A group of its own: a hung boot is stopped with vng's QEMU and all.
     cmd.process_group(0);
     let mut child = cmd.spawn().map_err(|source| VcanError::Io {
-        what: format!("starting {} through nice (coreutils)", vng.display()),
+        what: format!("starting {} through chrt and nice", vng.display()),
         source,
     })?;
     let out = child.stdout.take().map(|o| forward(o, false));

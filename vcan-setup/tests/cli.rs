@@ -1,5 +1,5 @@
 //! The `vcan-setup` binary on its command line: the numbers of `vm` (memory, CPUs, the
-//! host niceness) are bounded and refused with the argument named, before any VM is
+//! host niceness and real-time priority) are bounded and refused with the argument named, before any VM is
 //! started (issue 11, item 8).
 
 // Helpers outside #[test] functions unwrap and panic as the tests do.
@@ -9,7 +9,9 @@ use std::process::Command;
 
 #[test]
 fn vm_memory_and_cpus_out_of_range_are_refused_naming_the_argument() {
-    let cases: [(&[&str], &str); 11] = [
+    let cases: [(&[&str], &str); 13] = [
+        (&["--host-rt", "100"], "--host-rt"),
+        (&["--host-rt=-1"], "--host-rt"),
         (&["--host-nice", "-21"], "--host-nice"),
         (&["--host-nice", "20"], "--host-nice"),
         (&["--host-nice", "nice"], "--host-nice"),
