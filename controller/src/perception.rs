@@ -40,8 +40,10 @@
 //!    Levenberg-Marquardt on the geometric distances) and a line (total least squares).
 //!    It is a post when the circle is plausible (radius within
 //!    `[circle_radius_min, circle_radius_max]`, RMS residual at most `circle_rms_max`,
-//!    the laser outside the circle and the centre behind the points) and explains the
-//!    points clearly better than the line (`line_rms > circle_line_ratio circle_rms`).
+//!    the laser outside the circle and the centre behind the points, the radius pinned
+//!    down by the hits: its standard deviation from the fit's covariance at most
+//!    `circle_radius_sigma_max`) and explains the points clearly better than the line
+//!    (`line_rms > circle_line_ratio circle_rms`).
 //!    Otherwise the cluster is split into a polyline (iterative end-point fit with
 //!    `split_distance`, adjacent pieces merged back while they stay within it); pieces
 //!    with `line_min_points` hits and `segment_min_length` become wall segments, the
@@ -103,7 +105,11 @@
 //! A confirmed static track detected in at least `memory_min_hits` scans that the scan
 //! could not have seen ([`View::sees`]: out of the field of view, beyond the range, or
 //! behind a nearer return) is remembered, where it was, instead of missed while within
-//! `memory_radius` of the vehicle (a local map).
+//! `memory_radius` of the vehicle (a local map). A confirmed moving track the scan could
+//! not have seen goes on at its velocity (the filter's prediction, its motion held as
+//! last measured) for up to `moving_memory_s` after its last measurement, within
+//! `memory_radius`, instead of being missed: the walkers the car overtook are still
+//! there, coming up behind it, when it turns back in or stops.
 //!
 //! Only obstacles whose nearest point is within `detection_radius` (the paper's 8 m)
 //! of the vehicle's reference point (the rear axle centre, the pose's origin) are

@@ -918,6 +918,59 @@ mod perception {
     }
 
     #[test]
+    fn a_walker_overtaken_goes_on_at_its_pace_out_of_sight_and_is_then_forgotten() {
+        // A walker at 0.7 m/s 2 m right of the car's line, overtaken at 2 m/s: it
+        // leaves the field of view (270 degrees) behind the car. It goes on being
+        // reported moving where its pace takes it for `moving_memory_s`, then is
+        // dropped; with no such memory it is lost as it leaves the view.
+        let mount = default_mount();
+        for memory in [5.0, 0.0] {
+            let mut p = Perception::new(PerceptionConfig {
+                moving_memory_s: memory,
+                ..PerceptionConfig::default()
+            })
+            .expect("config");
+            let mut rng = Rng(41);
+            let (mut out_of_view, mut worst, mut gone) = (None::<f64>, 0.0f64, None::<f64>);
+            for k in 0..=750 {
+                let t = k as f64 / RATE;
+                let walker = [8.0 + 0.7 * t, -2.0];
+                let pose = Pose2::new(2.0 * t, 0.0, 0.0);
+                let world = [Shape::Circle { c: walker, r: 0.3 }];
+                let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
+                // Behind the laser's field of view: bearing beyond 135 degrees.
+                let bearing = (walker[1] - pose.y).atan2(walker[0] - (pose.x + 2.0));
+                if bearing.abs() > 0.76 * std::f64::consts::PI {
+                    out_of_view.get_or_insert(t);
+                }
+                let seen = out
+                    .obstacles
+                    .iter()
+                    .find(|o| dist([o.x, o.y], walker) < 2.0 && o.vx > 0.3);
+                match (seen, out_of_view) {
+                    (Some(o), Some(_)) => worst = worst.max(dist([o.x, o.y], walker)),
+                    (None, Some(_)) => {
+                        gone.get_or_insert(t);
+                    }
+                    (Some(_), None) => gone = None,
+                    (None, None) => {}
+                }
+            }
+            let (left, gone) = (out_of_view.expect("overtaken"), gone.expect("forgotten"));
+            eprintln!(
+                "walker overtaken, memory {memory} s: out of view at {left:.2} s, reported until {gone:.2} s, at most {worst:.2} m off"
+            );
+            if memory > 0.0 {
+                assert!(gone - left > memory - 1.5, "reported only until {gone} s");
+                assert!(gone - left < memory + 1.0, "reported until {gone} s");
+                assert!(worst < 1.5, "{worst}");
+            } else {
+                assert!(gone - left < 0.5, "reported until {gone} s");
+            }
+        }
+    }
+
+    #[test]
     fn a_hedge_driven_along_keeps_the_stretch_behind_the_scanner() {
         // A 30 m hedge 2.5 m to the left; the car drives along it at 2 m/s for 10 s.
         // The scanner's blind 90 degrees behind it hide all of the hedge more than
@@ -990,6 +1043,41 @@ mod perception {
         }
         eprintln!("gate of 2.0 m: the nearest circle edge {worst:.3} m from its middle");
         assert!(worst < 1.05, "the fence's ends are reported: {worst}");
+    }
+
+    #[test]
+    fn the_gap_between_parked_carts_stays_open_from_afar() {
+        // Two pairs of carts (2.4 x 1.2 m) parked end to end either side of the route,
+        // 2.6 m apart, seen from 20 m down to 14 m with the laser's full 16 m. Their
+        // ends face the laser: 1.2 m flat faces a few noisy hits wide, through which
+        // a circle metres wide once fitted (a "post" of radius 3.2 m straddling the
+        // route, so the car turned off to go round the whole row). No circle may
+        // reach into the gap by more than its wall chain's 0.35 m.
+        let mount = default_mount();
+        let world: Vec<Shape> = [[18.0, 1.9], [18.0, -1.9], [21.0, 1.9], [21.0, -1.9]]
+            .into_iter()
+            .flat_map(|c| box_sides(c, 2.4, 1.2))
+            .collect();
+        let mut worst = f64::INFINITY;
+        for seed in 0..8 {
+            let mut p = Perception::new(PerceptionConfig {
+                detection_radius: 16.0,
+                ..PerceptionConfig::default()
+            })
+            .expect("config");
+            let mut rng = Rng(100 + seed);
+            for k in 0..=150 {
+                let t = k as f64 / RATE;
+                let pose = Pose2::new(2.0 * t - 4.0, 0.02 * (seed as f64 - 4.0), 0.0);
+                let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
+                for o in out.obstacles.iter().filter(|o| o.x > 14.0) {
+                    let open = o.y.abs() - o.radius;
+                    worst = worst.min(open);
+                    assert!(open > 0.95, "seed {seed} k {k}: {o:?} reaches into the gap");
+                }
+            }
+        }
+        eprintln!("gap of 2.6 m: the nearest circle edge {worst:.3} m from its middle");
     }
 
     #[test]

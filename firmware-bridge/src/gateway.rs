@@ -144,6 +144,12 @@ pub struct GatewayConfig {
     /// Receive buffer asked for on each socket, bytes (the kernel doubles it; without
     /// CAP_NET_ADMIN it is capped at net.core.rmem_max).
     pub rcvbuf_bytes: usize,
+    /// SCHED_FIFO priority of the two forwarding threads (0: ordinary scheduling).
+    /// The gateway stands for a wire: a frame it holds up is late at the ECU behind
+    /// it, whose 100 ms heartbeat watchdog a busy machine must not trip (an ordinary
+    /// thread in a loaded VM held a heartbeat 124 ms). Refused without root or
+    /// CAP_SYS_NICE, which [`GatewayStats::scheduling`] says.
+    pub rt_priority: u8,
 }
 
 impl Default for GatewayConfig {
@@ -155,6 +161,7 @@ impl Default for GatewayConfig {
             log: None,
             tx_give_up_ms: 1000,
             rcvbuf_bytes: crate::can::DEEP_QUEUE_BYTES,
+            rt_priority: crate::realtime::DEFAULT_PRIORITY,
         }
     }
 }
@@ -170,6 +177,8 @@ struct Shared {
     log: Option<Mutex<ForwardLog>>,
     log_error: Mutex<Option<String>>,
     error: Mutex<Option<String>>,
+    /// Each forwarding thread's scheduling, as it started.
+    scheduling: Mutex<Vec<String>>,
     stop: AtomicBool,
     running: AtomicUsize,
     started: Instant,
@@ -207,6 +216,7 @@ impl Shared {
             uptime_s: self.started.elapsed().as_secs_f64(),
             running: self.running.load(Ordering::SeqCst) == 2 && !self.stop.load(Ordering::SeqCst),
             error,
+            scheduling: lock(&self.scheduling).clone(),
             to_physical: lock(&self.to_physical).snapshot(&self.table),
             to_sim: lock(&self.to_sim).snapshot(&self.table),
         }
@@ -283,6 +293,7 @@ impl Gateway {
             log,
             log_error: Mutex::new(None),
             error: Mutex::new(None),
+            scheduling: Mutex::new(Vec::with_capacity(2)),
             stop: AtomicBool::new(false),
             running: AtomicUsize::new(0),
             started: Instant::now(),
@@ -298,9 +309,16 @@ impl Gateway {
         ] {
             let shared = Arc::clone(&shared);
             shared.running.fetch_add(1, Ordering::SeqCst);
+            let rt_priority = config.rt_priority;
             let spawned = std::thread::Builder::new()
                 .name(format!("gateway {}->{}", from.iface(), to.iface()))
                 .spawn(move || {
+                    let rt = crate::realtime::promote(rt_priority);
+                    lock(&shared.scheduling).push(rt.promotion.describe(&format!(
+                        "{}->{}",
+                        from.iface(),
+                        to.iface()
+                    )));
                     if let Err(e) = forward(&shared, side, &from, &to) {
                         shared.fail(e.to_string());
                     }

@@ -525,6 +525,16 @@ fn a_burst_each_way_at_once_loses_nothing_and_keeps_order() -> Result<()> {
         );
         ensure!(dir.latency.samples == n, "{text}");
     }
+    // The wire keeps real time: both threads at the default real-time priority
+    // (the VM runs the tests as root).
+    ensure!(
+        stats.scheduling.len() == 2
+            && stats
+                .scheduling
+                .iter()
+                .all(|line| line.ends_with("SCHED_FIFO priority 40")),
+        "{text}"
+    );
     eprintln!(
         "burst: {N} frames each way in {took:.2?}; tx retries {} / {}; latency p50/p99 {:.0}/{:.0} us and {:.0}/{:.0} us",
         stats.to_physical.tx_retries,

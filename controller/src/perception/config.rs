@@ -23,6 +23,12 @@ pub struct PerceptionConfig {
     /// Only a track detected in at least this many scans is remembered: a few hits (a
     /// fragment, spurious returns) are no evidence of an object to keep out of sight.
     pub memory_min_hits: u32,
+    /// A moving obstacle out of the laser's sight (a walker the car passed, now behind
+    /// it) goes on at its velocity for up to this long since it was last measured,
+    /// seconds, within `memory_radius`, instead of being missed: a car that turns back
+    /// in ahead of walkers it overtook, or stops, must know they are coming. 0: missed
+    /// at once.
+    pub moving_memory_s: f64,
     /// The scanner's range noise (1 sigma); LMS111: 12 mm.
     pub range_noise_sigma: f64,
 
@@ -47,6 +53,12 @@ pub struct PerceptionConfig {
     pub circle_rms_max: f64,
     /// A circle is preferred to a line when line RMS > ratio * circle RMS.
     pub circle_line_ratio: f64,
+    /// The largest standard deviation of a post's fitted radius (from the fit's own
+    /// covariance), metres. Ten noisy hits on a flat face 18 m away (a parked cart's
+    /// end) can fit a circle 3-5 m wide that explains them a little better than the
+    /// line, with a radius uncertain by a metre; a real post's radius is pinned to a
+    /// few centimetres (the paper's 3 m circle seen over a 30 degree arc: 4-6 cm).
+    pub circle_radius_sigma_max: f64,
     /// Smallest polyline piece that is a wall segment.
     pub line_min_points: usize,
     pub segment_min_length: f64,
@@ -117,6 +129,7 @@ impl Default for PerceptionConfig {
             moving_detection_radius: 16.0,
             memory_radius: 25.0,
             memory_min_hits: 10,
+            moving_memory_s: 5.0,
             range_noise_sigma: 0.012,
             breakpoint_lambda_deg: 10.0,
             breakpoint_noise_factor: 3.0,
@@ -127,6 +140,7 @@ impl Default for PerceptionConfig {
             circle_radius_max: 5.0,
             circle_rms_max: 0.05,
             circle_line_ratio: 1.5,
+            circle_radius_sigma_max: 0.25,
             line_min_points: 5,
             segment_min_length: 0.5,
             split_distance: 0.1,
@@ -204,6 +218,7 @@ impl PerceptionConfig {
             ("circle_radius_max", self.circle_radius_max),
             ("circle_rms_max", self.circle_rms_max),
             ("circle_line_ratio", self.circle_line_ratio),
+            ("circle_radius_sigma_max", self.circle_radius_sigma_max),
             ("segment_min_length", self.segment_min_length),
             ("split_distance", self.split_distance),
             ("blob_min_radius", self.blob_min_radius),
@@ -227,6 +242,7 @@ impl PerceptionConfig {
             ),
             ("velocity_hold_chi2", self.velocity_hold_chi2),
             ("moving_confirm_s", self.moving_confirm_s),
+            ("moving_memory_s", self.moving_memory_s),
         ] {
             if v.abs() > PLAUSIBLE_LIMIT {
                 return Err(invalid(
@@ -247,6 +263,7 @@ impl PerceptionConfig {
             }
         }
         non_negative("moving_confirm_s", self.moving_confirm_s)?;
+        non_negative("moving_memory_s", self.moving_memory_s)?;
         positive("range_noise_sigma", self.range_noise_sigma)?;
         if !(self.breakpoint_lambda_deg > 0.0 && self.breakpoint_lambda_deg < 90.0) {
             return Err(invalid(
@@ -271,6 +288,7 @@ impl PerceptionConfig {
         }
         positive("circle_rms_max", self.circle_rms_max)?;
         positive("circle_line_ratio", self.circle_line_ratio)?;
+        positive("circle_radius_sigma_max", self.circle_radius_sigma_max)?;
         if self.line_min_points < 2 {
             return Err(invalid("line_min_points", "must be at least 2"));
         }

@@ -235,6 +235,12 @@ fn is_post(
     if behind <= 0.0 {
         return false;
     }
+    // The radius pinned down: a shallow arc of noisy hits on a flat face (a parked
+    // cart's end 18 m away) fits a circle metres wide whose radius the hits hardly
+    // constrain.
+    if c.covariance[2][2].sqrt() > cfg.circle_radius_sigma_max {
+        return false;
+    }
     line.is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
 }
 

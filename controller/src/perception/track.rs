@@ -169,6 +169,11 @@ struct PointTrack {
     moving_since: Option<f64>,
     /// The position as of the last scan that measured it.
     measured: [f64; 2],
+    /// The stamp of the last scan that measured it.
+    last_hit: f64,
+    /// Moving, out of sight and carried on at its velocity (`moving_memory_s`) on
+    /// the latest scan.
+    coasting: bool,
 }
 
 impl PointTrack {
@@ -200,6 +205,8 @@ impl PointTrack {
             life: Life::new(stamp, cfg),
             moving_since: None,
             measured: m.centre,
+            last_hit: stamp,
+            coasting: false,
         };
         let r = track.measurement_covariance(m, cfg);
         track.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
@@ -682,6 +689,7 @@ impl Perception {
             if let Some(ti) = t {
                 if let Some(track) = self.tracks.get_mut(*ti) {
                     track.update(m, cfg);
+                    track.last_hit = stamp;
                 }
                 if let Some(u) = updated.get_mut(*ti) {
                     *u = true;
@@ -699,10 +707,20 @@ impl Perception {
         };
         for (t, u) in self.tracks.iter_mut().zip(&updated) {
             let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
+            t.coasting = false;
             if *u {
                 continue;
             }
-            if remembered(t.state[0], t.state[1], t.radius, &t.life, moving) {
+            if moving
+                && t.life.confirmed
+                && stamp - t.last_hit <= cfg.moving_memory_s
+                && (t.state[0] - pose.x).hypot(t.state[1] - pose.y) - t.radius <= cfg.memory_radius
+                && !sees(t.state[0], t.state[1], t.radius)
+            {
+                // Moving out of sight: it goes on where its velocity takes it (the
+                // prediction above), its motion held as last measured.
+                t.coasting = true;
+            } else if remembered(t.state[0], t.state[1], t.radius, &t.life, moving) {
                 // Static: the filter's velocity below the dead band is noise, and with
                 // no measurement to correct it the remembered position would drift.
                 t.state[2] = 0.0;
@@ -718,7 +736,7 @@ impl Perception {
                         <= cfg.memory_radius
                     || sees(t.state[0], t.state[1], t.radius))
         });
-        for t in &mut self.tracks {
+        for t in self.tracks.iter_mut().filter(|t| !t.coasting) {
             t.note_motion(stamp, cfg);
         }
         for (m, t) in detections.circles.iter().zip(&track_of) {

@@ -59,6 +59,10 @@ struct Args {
         value_parser = clap::value_parser!(u64).range(0..=60_000)
     )]
     tx_give_up_ms: u64,
+    /// SCHED_FIFO priority of the forwarding threads, 0 (ordinary) to 99: a frame
+    /// the gateway holds up is late at the ECU behind it.
+    #[arg(long, default_value_t = firmware_bridge::realtime::DEFAULT_PRIORITY, value_parser = firmware_bridge::realtime::parse_priority)]
+    rt_priority: u8,
 }
 
 fn direction_line(d: &DirectionStats) -> String {
@@ -99,6 +103,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         physical_nodes: args.nodes.clone(),
         log: args.log.clone(),
         tx_give_up_ms: args.tx_give_up_ms,
+        rt_priority: args.rt_priority,
         ..GatewayConfig::default()
     })?;
     let table = gateway.routing();

@@ -230,6 +230,8 @@ pub struct GatewayStats {
     pub running: bool,
     /// The error that stopped a forwarding thread, if one did.
     pub error: Option<String>,
+    /// How each forwarding thread is scheduled (one line each, as it started).
+    pub scheduling: Vec<String>,
     /// Frames read on the simulator's side, forwarded to the physical one.
     pub to_physical: DirectionStats,
     /// Frames read on the physical side, forwarded to the simulator's.

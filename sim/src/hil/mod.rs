@@ -186,7 +186,14 @@ impl Endpoints {
             std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id))
         });
         let gateway_logs = options.record.then_some(options.results.as_path());
-        let wires = Wires::open(sc, &gps_link, &options.run_id, horizon, gateway_logs)?;
+        let wires = Wires::open(
+            sc,
+            &gps_link,
+            &options.run_id,
+            horizon,
+            gateway_logs,
+            options.rt_priority,
+        )?;
         Ok(Endpoints {
             steering,
             throttle,

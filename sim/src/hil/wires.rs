@@ -78,13 +78,15 @@ impl Wires {
     /// server and driver), and a gateway to each physical bus. `can_horizon` is the
     /// horizon of the ECUs' timed sockets, which the run sets at each tick. With
     /// `gateway_logs` (a recorded run's results), each gateway logs the frames it
-    /// forwards there, in `candump -l -x` form ([`gateway_log`]).
+    /// forwards there, in `candump -l -x` form ([`gateway_log`]). The gateways'
+    /// threads run at the run's `rt_priority`, as its tick loop does.
     pub fn open(
         sc: &Scenario,
         gps_link: &Path,
         run_id: &str,
         can_horizon: Horizon,
         gateway_logs: Option<&Path>,
+        rt_priority: u8,
     ) -> Result<Wires, HilError> {
         let devices = &sc.devices;
         let (gps, gps_line) = match &devices.gps {
@@ -156,6 +158,7 @@ impl Wires {
                 physical_iface: physical.clone(),
                 physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
                 log: gateway_logs.map(|dir| dir.join(gateway_log(physical))),
+                rt_priority,
                 ..GatewayConfig::default()
             };
             gateways.push(Gateway::spawn(config).map_err(|source| HilError::Gateway {
