@@ -252,22 +252,15 @@ fn host_rt(prio: u8) -> Option<u8> {
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .output();
-    match probe {
-        Ok(out) if out.status.success() => Some(prio),
-        Ok(out) => {
-            eprintln!(
-                "vcan-setup: QEMU cannot run at SCHED_RR {prio} on this host ({}); it runs at its niceness",
-                String::from_utf8_lossy(&out.stderr).trim()
-            );
-            None
-        }
-        Err(e) => {
-            eprintln!(
-                "vcan-setup: QEMU cannot run at SCHED_RR {prio} on this host (chrt: {e}); it runs at its niceness"
-            );
-            None
-        }
-    }
+    let refused = match probe {
+        Ok(out) if out.status.success() => return Some(prio),
+        Ok(out) => String::from_utf8_lossy(&out.stderr).trim().to_owned(),
+        Err(e) => format!("chrt: {e}"),
+    };
+    eprintln!(
+        "vcan-setup: QEMU cannot run at SCHED_RR {prio} on this host ({refused}); it runs at its niceness"
+    );
+    None
 }
 
 /// One boot: `Ok(Some(code))` when the guest ran the command, `Ok(None)` when the VM

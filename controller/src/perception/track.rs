@@ -699,11 +699,11 @@ impl Perception {
         // The local map: a confirmed static track the scan could not have seen is
         // remembered, not missed, while within `memory_radius`.
         let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
+        let out_of_sight_nearby = |x: f64, y: f64, r: f64| {
+            (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius && !sees(x, y, r)
+        };
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
-            life.memorable(cfg)
-                && !moving
-                && (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius
-                && !sees(x, y, r)
+            life.memorable(cfg) && !moving && out_of_sight_nearby(x, y, r)
         };
         for (t, u) in self.tracks.iter_mut().zip(&updated) {
             let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
@@ -714,8 +714,7 @@ impl Perception {
             if moving
                 && t.life.confirmed
                 && stamp - t.last_hit <= cfg.moving_memory_s
-                && (t.state[0] - pose.x).hypot(t.state[1] - pose.y) - t.radius <= cfg.memory_radius
-                && !sees(t.state[0], t.state[1], t.radius)
+                && out_of_sight_nearby(t.state[0], t.state[1], t.radius)
             {
                 // Moving out of sight: it goes on where its velocity takes it (the
                 // prediction above), its motion held as last measured.
