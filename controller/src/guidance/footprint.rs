@@ -50,20 +50,53 @@ impl Footprint {
 
     /// Whether the car at (x, y, heading) clears the moving obstacle `o` by the margin
     /// wherever its constant-velocity track takes it from `from` to `to` seconds after
-    /// the instant its position is of (every [`TRACK_STEP`] along the track).
-    pub fn clear_of_track(
+    /// the instant its position is of.
+    pub fn clear_of_track(&self, pose: (f64, f64, f64), o: &Obstacle, from: f64, to: f64) -> bool {
+        self.track_distance(pose, o, from, to) > o.radius + self.margin
+    }
+
+    /// The least distance from the car's rectangle at (x, y, heading) to the centre of
+    /// the moving obstacle `o` along its constant-velocity track from `from` to `to`
+    /// seconds after the instant its position is of (every [`TRACK_STEP`] along it).
+    fn track_distance(
         &self,
         (x, y, heading): (f64, f64, f64),
         o: &Obstacle,
         from: f64,
         to: f64,
-    ) -> bool {
+    ) -> f64 {
         let travel = o.vx.hypot(o.vy) * (to - from);
         let n = (travel / TRACK_STEP).ceil().clamp(1.0, 4096.0) as usize;
-        (0..=n).all(|j| {
-            let s = from + (to - from) * j as f64 / n as f64;
-            self.distance(x, y, heading, o.x + o.vx * s, o.y + o.vy * s) > o.radius + self.margin
-        })
+        (0..=n)
+            .map(|j| {
+                let s = from + (to - from) * j as f64 / n as f64;
+                self.distance(x, y, heading, o.x + o.vx * s, o.y + o.vy * s)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The moving obstacles as [`Self::path_clear_of_moving`] sees them from the car
+    /// at `pose`, each swept over +- `margin_s`: one whose swept track comes within the
+    /// margin of the car where it stands is shrunk to just clear of it there, so a path
+    /// that never brings the car nearer its track is not refused (as
+    /// [`Self::clip_to_start`] does for static obstacles).
+    pub fn clip_tracks_to_start(
+        &self,
+        pose: (f64, f64, f64),
+        moving: &[Obstacle],
+        margin_s: f64,
+    ) -> Vec<Obstacle> {
+        moving
+            .iter()
+            .map(|o| {
+                let gap =
+                    self.track_distance(pose, o, -margin_s, margin_s) - self.margin - START_SLACK;
+                Obstacle {
+                    radius: o.radius.min(gap.max(0.0)),
+                    ..*o
+                }
+            })
+            .collect()
     }
 
     /// Whether the car, driving the trajectory's path at its pace (dx/dt) from the

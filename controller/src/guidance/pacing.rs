@@ -29,6 +29,12 @@ pub struct Pacing {
     pub oncoming: bool,
     /// The side kept to: the right (else the left).
     pub keep_right: bool,
+    /// The planning circle (the car's radius with the safety margin), metres. Moving
+    /// obstacles keep its clearance in every tier: the passage tier's narrower circle
+    /// is checked with the car's rectangle against the static obstacles, and a cart or
+    /// a walker met in a passage must come no nearer the rear axle than this circle
+    /// allows (the nose is 2 m ahead of it).
+    pub circle: f64,
 }
 
 /// The nearest traffic ahead going the car's way.
@@ -198,6 +204,7 @@ mod tests {
             time_scale: 1.0,
             oncoming: false,
             keep_right: true,
+            circle: 2.3,
         }
     }
 

@@ -394,6 +394,8 @@ fn solve_towards(
     let line = p.reference_line().map_err(ReplanError::ReferenceLine)?;
     let speeds = speeds.unwrap_or(&pacing.speeds);
     let fastest = speeds.iter().copied().fold(0.0, f64::max);
+    let inflation = (pacing.circle - p.vehicle_radius).max(0.0);
+    let start = (p.state.x, p.state.y, p.state.theta);
     let mut best: Option<(f64, Chosen)> = None;
     for &pace in speeds {
         // The paces come fastest first, and a slower one loses more time: once that
@@ -407,17 +409,33 @@ fn solve_towards(
         let margin = pacing.time_margin + pacing.schedule_slip(pace);
         let mut problem = p.clone();
         problem.t_f = p.t_k + span / pace;
+        // Moving obstacles the car is already within the planning circle of (a walker
+        // it is passing, or that passes it) are shrunk in the sweep so the car can
+        // drive on; shrunk, they no longer keep the nose and the corners clear, so the
+        // car's rectangle must then clear their tracks in space-time as well.
+        let mut near = Vec::new();
         problem.obstacles = p
             .obstacles
             .iter()
             .flat_map(|o| {
                 if o.vx == 0.0 && o.vy == 0.0 {
-                    vec![*o]
-                } else {
-                    sweep(o, margin, p.state.x, p.state.y, p.vehicle_radius)
+                    return vec![*o];
                 }
+                let inflated = Obstacle {
+                    radius: o.radius + inflation,
+                    ..*o
+                };
+                let swept = sweep(&inflated, margin, p.state.x, p.state.y, p.vehicle_radius);
+                if swept.iter().any(|c| c.radius < inflated.radius) {
+                    near.push(*o);
+                }
+                swept
             })
             .collect();
+        let near = req.footprint.clip_tracks_to_start(start, &near, margin);
+        let clear = |t: &Trajectory| {
+            clear(t) && (near.is_empty() || req.footprint.path_clear_of_moving(t, &near, margin))
+        };
         if let Some(c) = solve_one(&problem, req.steer_limit, &clear)? {
             let score = pacing.score(
                 c.trajectory.path().reference_cost(&line) / span.abs(),
