@@ -542,12 +542,12 @@ fn a_burst_each_way_at_once_loses_nothing_and_keeps_order() -> Result<()> {
     }
     // The wire keeps real time: both threads at the default real-time priority
     // (the VM runs the tests as root).
+    let fifo = format!(
+        "SCHED_FIFO priority {}",
+        firmware_bridge::realtime::DEFAULT_PRIORITY
+    );
     ensure!(
-        stats.scheduling.len() == 2
-            && stats
-                .scheduling
-                .iter()
-                .all(|line| line.ends_with("SCHED_FIFO priority 40")),
+        stats.scheduling.len() == 2 && stats.scheduling.iter().all(|line| line.ends_with(&fifo)),
         "{text}"
     );
     eprintln!(
