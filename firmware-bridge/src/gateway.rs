@@ -41,7 +41,7 @@ pub mod stats;
 
 use std::io;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
@@ -166,6 +166,29 @@ impl Default for GatewayConfig {
     }
 }
 
+/// Whether the gateway runs. Everything that changes it (a thread starting or ending,
+/// a failure, a stop) takes the one lock, and a snapshot reads it under the same lock:
+/// a failure stores its error and `stopped` in one critical section, so no reader can
+/// see the gateway stopped by a failure without the failure's error (the two used to be
+/// separate, error first and flag second, and a snapshot between them said "stopped,
+/// no error").
+#[derive(Debug, Default)]
+struct RunState {
+    /// Forwarding threads started and not yet ended.
+    threads: usize,
+    /// Stop asked, by the handle or by a failure.
+    stopped: bool,
+    /// The first error that stopped the gateway.
+    error: Option<String>,
+}
+
+impl RunState {
+    /// Both directions forwarding.
+    fn running(&self) -> bool {
+        self.threads == 2 && !self.stopped
+    }
+}
+
 /// State shared by the handle and the forwarding threads.
 #[derive(Debug)]
 struct Shared {
@@ -176,16 +199,48 @@ struct Shared {
     to_sim: Mutex<DirectionCounters>,
     log: Option<Mutex<ForwardLog>>,
     log_error: Mutex<Option<String>>,
-    error: Mutex<Option<String>>,
+    /// Whether the gateway runs, and why it stopped: one lock, so a snapshot sees
+    /// either "running" or "stopped" with the error that stopped it, never a mix.
+    state: Mutex<RunState>,
     /// Each forwarding thread's scheduling, as it started.
     scheduling: Mutex<Vec<String>>,
+    /// The forwarding threads' cue to stop (read without a lock on every frame);
+    /// [`RunState::stopped`] is set first, under the state's lock. Never read to tell
+    /// whether the gateway runs: that is the state's.
     stop: AtomicBool,
-    running: AtomicUsize,
     started: Instant,
     tx_give_up: Duration,
 }
 
 impl Shared {
+    /// The state of a gateway about to start (no thread running yet).
+    fn new(table: RoutingTable, config: &GatewayConfig, log: Option<Mutex<ForwardLog>>) -> Self {
+        Shared {
+            to_physical: Mutex::new(DirectionCounters::new(
+                &config.sim_iface,
+                &config.physical_iface,
+                Side::Sim,
+                &table,
+            )),
+            to_sim: Mutex::new(DirectionCounters::new(
+                &config.physical_iface,
+                &config.sim_iface,
+                Side::Physical,
+                &table,
+            )),
+            table,
+            sim_iface: config.sim_iface.clone(),
+            physical_iface: config.physical_iface.clone(),
+            log,
+            log_error: Mutex::new(None),
+            state: Mutex::new(RunState::default()),
+            scheduling: Mutex::new(Vec::with_capacity(2)),
+            stop: AtomicBool::new(false),
+            started: Instant::now(),
+            tx_give_up: Duration::from_millis(config.tx_give_up_ms),
+        }
+    }
+
     fn counters(&self, from: Side) -> &Mutex<DirectionCounters> {
         match from {
             Side::Sim => &self.to_physical,
@@ -193,14 +248,35 @@ impl Shared {
         }
     }
 
+    /// Stop the gateway for `error` (the first one is kept).
     fn fail(&self, error: String) {
         tracing::error!("gateway stopped: {error}");
-        lock(&self.error).get_or_insert(error);
+        let mut state = lock(&self.state);
+        state.error.get_or_insert(error);
+        self.halt(&mut state);
+    }
+
+    /// Ask the forwarding threads to stop (the state's lock held).
+    fn halt(&self, state: &mut RunState) {
+        state.stopped = true;
         self.stop.store(true, Ordering::SeqCst);
     }
 
+    /// A forwarding thread starting (`+1`) or ending (`-1`).
+    fn thread_count(&self, delta: isize) {
+        let mut state = lock(&self.state);
+        state.threads = state.threads.saturating_add_signed(delta);
+    }
+
+    fn is_running(&self) -> bool {
+        lock(&self.state).running()
+    }
+
     fn snapshot(&self) -> GatewayStats {
-        let mut error = lock(&self.error).clone();
+        let (running, mut error) = {
+            let state = lock(&self.state);
+            (state.running(), state.error.clone())
+        };
         if let Some(log_error) = lock(&self.log_error).as_ref() {
             let text = format!("log: {log_error}");
             error = Some(match error {
@@ -214,7 +290,7 @@ impl Shared {
             physical_nodes: self.table.physical_nodes().to_vec(),
             sim_nodes: self.table.sim_nodes().to_vec(),
             uptime_s: self.started.elapsed().as_secs_f64(),
-            running: self.running.load(Ordering::SeqCst) == 2 && !self.stop.load(Ordering::SeqCst),
+            running,
             error,
             scheduling: lock(&self.scheduling).clone(),
             to_physical: lock(&self.to_physical).snapshot(&self.table),
@@ -274,31 +350,7 @@ impl Gateway {
             rcvbuf = ?(sim.rcvbuf(), physical.rcvbuf()),
             "gateway starting"
         );
-        let shared = Arc::new(Shared {
-            to_physical: Mutex::new(DirectionCounters::new(
-                &config.sim_iface,
-                &config.physical_iface,
-                Side::Sim,
-                &table,
-            )),
-            to_sim: Mutex::new(DirectionCounters::new(
-                &config.physical_iface,
-                &config.sim_iface,
-                Side::Physical,
-                &table,
-            )),
-            table,
-            sim_iface: config.sim_iface.clone(),
-            physical_iface: config.physical_iface.clone(),
-            log,
-            log_error: Mutex::new(None),
-            error: Mutex::new(None),
-            scheduling: Mutex::new(Vec::with_capacity(2)),
-            stop: AtomicBool::new(false),
-            running: AtomicUsize::new(0),
-            started: Instant::now(),
-            tx_give_up: Duration::from_millis(config.tx_give_up_ms),
-        });
+        let shared = Arc::new(Shared::new(table, &config, log));
         let mut handle = GatewayHandle {
             shared: Arc::clone(&shared),
             threads: Vec::with_capacity(2),
@@ -308,7 +360,7 @@ impl Gateway {
             (Side::Physical, physical, sim),
         ] {
             let shared = Arc::clone(&shared);
-            shared.running.fetch_add(1, Ordering::SeqCst);
+            shared.thread_count(1);
             let rt_priority = config.rt_priority;
             let spawned = std::thread::Builder::new()
                 .name(format!("gateway {}->{}", from.iface(), to.iface()))
@@ -322,12 +374,12 @@ impl Gateway {
                     if let Err(e) = forward(&shared, side, &from, &to) {
                         shared.fail(e.to_string());
                     }
-                    shared.running.fetch_sub(1, Ordering::SeqCst);
+                    shared.thread_count(-1);
                 });
             match spawned {
                 Ok(t) => handle.threads.push(t),
                 Err(e) => {
-                    handle.shared.running.fetch_sub(1, Ordering::SeqCst);
+                    handle.shared.thread_count(-1);
                     // Dropping the handle stops and joins what started.
                     return Err(GatewayError::Thread(e));
                 }
@@ -351,7 +403,7 @@ impl GatewayHandle {
     /// Whether both directions are still forwarding (false after a fatal error, with
     /// the error in [`GatewayStats::error`]).
     pub fn is_running(&self) -> bool {
-        self.shared.running.load(Ordering::SeqCst) == 2 && !self.shared.stop.load(Ordering::SeqCst)
+        self.shared.is_running()
     }
 
     /// Stop forwarding, join both threads, flush the log, and return the final counts.
@@ -361,7 +413,7 @@ impl GatewayHandle {
     }
 
     fn shutdown(&mut self) {
-        self.shared.stop.store(true, Ordering::SeqCst);
+        self.shared.halt(&mut lock(&self.shared.state));
         for t in self.threads.drain(..) {
             if t.join().is_err() {
                 self.shared.fail("a forwarding thread panicked".to_owned());
@@ -593,6 +645,46 @@ mod tests {
         assert_eq!(c.log, None);
         let err = serde_json::from_str::<GatewayConfig>(r#"{"physical_node": []}"#).unwrap_err();
         assert!(err.to_string().contains("physical_node"), "{err}");
+    }
+
+    /// A forwarding thread failing while another thread takes snapshots: no snapshot
+    /// may say "stopped" without the error that stopped it (the vcan test unplugging
+    /// the physical interface read that torn state about once in 80 runs).
+    #[test]
+    fn a_snapshot_never_sees_the_gateway_stopped_without_its_error() {
+        let config = GatewayConfig {
+            physical_nodes: vec!["STEERING_ECU".into()],
+            ..GatewayConfig::default()
+        };
+        for round in 0..1000 {
+            let table = RoutingTable::new(&NETWORK, &config.physical_nodes).unwrap();
+            let shared = Arc::new(Shared::new(table, &config, None));
+            lock(&shared.state).threads = 2;
+            let barrier = Arc::new(std::sync::Barrier::new(2));
+            let failing = {
+                let shared = Arc::clone(&shared);
+                let barrier = Arc::clone(&barrier);
+                std::thread::spawn(move || {
+                    barrier.wait();
+                    shared.fail("can1 went away".to_owned());
+                })
+            };
+            barrier.wait();
+            let mut snapshots = 0u64;
+            loop {
+                let stats = shared.snapshot();
+                snapshots += 1;
+                if !stats.running {
+                    assert_eq!(
+                        stats.error.as_deref(),
+                        Some("can1 went away"),
+                        "round {round}, snapshot {snapshots}: stopped without its error"
+                    );
+                    break;
+                }
+            }
+            failing.join().unwrap();
+        }
     }
 
     #[test]
