@@ -32,6 +32,9 @@ pub struct Car {
     /// constant, seconds (how far the car rolls on after a lower speed is commanded).
     pub speed_dead_time_s: f64,
     pub speed_time_constant_s: f64,
+    /// Deceleration at full brake, m/s^2 (a 48 V golf car's drum brakes on dry
+    /// tarmac, measured from 3 m/s).
+    pub brake_decel: f64,
 }
 
 /// The paper's car.
@@ -50,4 +53,5 @@ pub const PAPER_CAR: Car = Car {
     steer_time_constant_s: 0.08,
     speed_dead_time_s: 0.05,
     speed_time_constant_s: 0.4,
+    brake_decel: 4.0,
 };

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, within};
+use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive_up_to, within};
 
 /// Why a configuration was refused.
 pub type ConfigError = ugv_fields::FileError;
@@ -50,6 +50,10 @@ pub struct Vehicle {
     /// reversal) is commanded that much earlier.
     pub speed_dead_time_s: f64,
     pub speed_time_constant_s: f64,
+    /// Deceleration at full brake, m/s^2, as measured on the car: what a stop that
+    /// the speed loop alone cannot make in time brakes with, and what the actuator
+    /// monitor expects of a commanded brake (`monitor.rs`).
+    pub brake_decel: f64,
 }
 
 impl Vehicle {
@@ -81,6 +85,7 @@ impl Default for Vehicle {
             steer_time_constant_s: car.steer_time_constant_s,
             speed_dead_time_s: car.speed_dead_time_s,
             speed_time_constant_s: car.speed_time_constant_s,
+            brake_decel: car.brake_decel,
         }
     }
 }
@@ -330,12 +335,48 @@ impl ControllerConfig {
         ControllerConfig::from_toml(&text, &path.display().to_string())
     }
 
-    /// The first field that makes no sense, and why: every field is finite, has the
-    /// right sign and lies within plausible bounds (the DBC's signal ranges where a
-    /// field ends up on the bus), and the perception tuning passes perception's own
-    /// checks. `Controller::new` runs this too, so nothing builds a
-    /// controller from a configuration `check-config` would refuse.
+    /// The first field that makes no sense, and why: every physical parameter finite
+    /// and within its plausible range (the table [`crate::ranges::CONFIG`], each range
+    /// with its source: the golf car, the DBC's signal ranges, the datasheets), the
+    /// fields' relations (speeds up to the top speed, the footprint inside the
+    /// planning circle, a goal not reached at the start), and the perception tuning
+    /// passes perception's own checks. `Controller::new` runs this too, so nothing
+    /// builds a controller from a configuration `check-config` would refuse.
     pub fn validate(&self) -> Result<(), FieldError> {
+        ugv_fields::check_bounds(self, crate::ranges::CONFIG)?;
+        self.check_mission()?;
+        self.check_vehicle()?;
+        self.check_planner()?;
+        let f = &self.follower;
+        if f.kind == FollowerKind::Anfis && f.anfis_model.is_none() {
+            return Err(FieldError::new(
+                FieldPath::of(&["follower", "anfis_model"]),
+                "is required when follower.kind = \"anfis\"",
+            ));
+        }
+        let s = &self.safety;
+        if let Some(t) = s.gps_timeout_s
+            && t * s.gps_rate_hz < 1.0
+        {
+            return Err(FieldError::new(
+                FieldPath::of(&["safety", "gps_timeout_s"]),
+                format!(
+                    "{t} s is shorter than one epoch at safety.gps_rate_hz = {} Hz",
+                    s.gps_rate_hz
+                ),
+            ));
+        }
+        self.perception.validate().map_err(|e| match e {
+            crate::perception::PerceptionError::InvalidConfig { field, message } => {
+                FieldError::new(FieldPath::of(&["perception", field]), message)
+            }
+            other => FieldError::new(FieldPath::of(&["perception"]), other.to_string()),
+        })
+    }
+
+    /// The mission's datum, places and route (its ranges checked by the table); the
+    /// goal not reached at the start.
+    fn check_mission(&self) -> Result<(), FieldError> {
         let m = &self.mission;
         let at = |k: &'static str| FieldPath::of(&["mission", k]);
         let d = &m.datum;
@@ -367,14 +408,8 @@ impl ControllerConfig {
         if let Some(h) = m.goal_heading_deg {
             angle_deg(&at("goal_heading_deg"), h)?;
         }
-        positive_up_to(&at("goal_tolerance"), m.goal_tolerance, 50.0, "m")?;
         if let Some(v) = m.goal_speed_limit {
-            positive_up_to(
-                &at("goal_speed_limit"),
-                v,
-                self.vehicle.max_speed,
-                "m/s (vehicle.max_speed)",
-            )?;
+            up_to_max_speed(&at("goal_speed_limit"), v, self.vehicle.max_speed)?;
         }
         crate::route::check_waypoints(
             &at("waypoints"),
@@ -384,101 +419,29 @@ impl ControllerConfig {
             &at("goal_x"),
             self.vehicle.max_speed,
         )?;
+        crate::route::check_goal_not_at_start(
+            &at("goal_tolerance"),
+            m.goal_tolerance,
+            (m.start_x, m.start_y),
+            (m.goal_x, m.goal_y),
+        )
+    }
 
+    /// The vehicle's relations: the rear overhang within the length, the footprint
+    /// inside the planning circle (with the safety margin).
+    fn check_vehicle(&self) -> Result<(), FieldError> {
         let v = &self.vehicle;
-        let at = |k: &'static str| FieldPath::of(&["vehicle", k]);
-        positive_up_to(&at("wheelbase"), v.wheelbase, 10.0, "m")?;
-        positive(&at("max_steer_deg"), v.max_steer_deg)?;
-        if v.max_steer_deg >= 60.0 {
-            return Err(FieldError::new(
-                at("max_steer_deg"),
-                format!("must be below 60 degrees, is {}", v.max_steer_deg),
-            ));
-        }
-        // The DBC's MaxRate and TargetSpeed ranges.
         within(
-            &at("steer_rate_deg_s"),
-            v.steer_rate_deg_s,
-            0.0,
-            500.0,
-            "deg/s",
-        )?;
-        positive_up_to(&at("max_speed"), v.max_speed, 10.0, "m/s")?;
-        positive_up_to(&at("radius"), v.radius, 20.0, "m")?;
-        positive_up_to(&at("length"), v.length, 20.0, "m")?;
-        positive_up_to(&at("width"), v.width, 10.0, "m")?;
-        within(
-            &at("rear_overhang"),
+            &FieldPath::of(&["vehicle", "rear_overhang"]),
             v.rear_overhang,
             0.0,
             v.length,
             "m (up to length)",
         )?;
-        for (k, x) in [
-            ("antenna_x", v.antenna_x),
-            ("antenna_y", v.antenna_y),
-            ("laser_x", v.laser_x),
-            ("laser_y", v.laser_y),
-        ] {
-            within(&at(k), x, -20.0, 20.0, "m from the rear axle")?;
-        }
-        angle_deg(&at("laser_yaw_deg"), v.laser_yaw_deg)?;
-        // The scenario's range; the command history the prediction reads covers it
-        // (monitor.rs).
-        within(&at("steer_dead_time_s"), v.steer_dead_time_s, 0.0, 5.0, "s")?;
-        within(
-            &at("steer_time_constant_s"),
-            v.steer_time_constant_s,
-            0.0,
-            2.0,
-            "s",
+        angle_deg(
+            &FieldPath::of(&["vehicle", "laser_yaw_deg"]),
+            v.laser_yaw_deg,
         )?;
-        within(&at("speed_dead_time_s"), v.speed_dead_time_s, 0.0, 5.0, "s")?;
-        within(
-            &at("speed_time_constant_s"),
-            v.speed_time_constant_s,
-            0.0,
-            5.0,
-            "s",
-        )?;
-
-        let l = &self.localisation;
-        let at = |k: &'static str| FieldPath::of(&["localisation", k]);
-        within(
-            &at("fix_time_constant_s"),
-            l.fix_time_constant_s,
-            0.0,
-            5.0,
-            "s",
-        )?;
-        within(
-            &at("float_fix_time_constant_s"),
-            l.float_fix_time_constant_s,
-            0.0,
-            10.0,
-            "s",
-        )?;
-        within(&at("steer_bias_gain"), l.steer_bias_gain, 0.0, 1.0, "")?;
-        within(
-            &at("max_steer_bias_deg"),
-            l.max_steer_bias_deg,
-            0.0,
-            10.0,
-            "degrees",
-        )?;
-
-        let pc = &self.planner;
-        let at = |k: &'static str| FieldPath::of(&["planner", k]);
-        positive_up_to(&at("replan_period_s"), pc.replan_period_s, 10.0, "s")?;
-        within(&at("horizon_m"), pc.horizon_m, 5.0, 200.0, "m")?;
-        within(
-            &at("horizon_min_m"),
-            pc.horizon_min_m,
-            2.0,
-            pc.horizon_m,
-            "m (up to horizon_m)",
-        )?;
-        within(&at("safety_margin"), pc.safety_margin, 0.0, 5.0, "m")?;
         let corner = (v.length - v.rear_overhang)
             .max(v.rear_overhang)
             .hypot(v.width / 2.0);
@@ -491,25 +454,30 @@ impl ControllerConfig {
                 ),
             ));
         }
-        within(&at("passage_margin"), pc.passage_margin, 0.0, 5.0, "m")?;
-        positive_up_to(
-            &at("passage_speed"),
-            pc.passage_speed,
-            v.max_speed,
-            "m/s (up to vehicle.max_speed)",
+        Ok(())
+    }
+
+    /// The planner's relations: the horizons ordered, the speeds up to the top speed,
+    /// the pace fractions, the alignment angles ordered.
+    fn check_planner(&self) -> Result<(), FieldError> {
+        let pc = &self.planner;
+        let at = |k: &'static str| FieldPath::of(&["planner", k]);
+        let max_speed = self.vehicle.max_speed;
+        within(
+            &at("horizon_min_m"),
+            pc.horizon_min_m,
+            2.0,
+            pc.horizon_m,
+            "m (up to horizon_m)",
         )?;
-        positive(&at("cruise_speed"), pc.cruise_speed)?;
-        if pc.cruise_speed > v.max_speed {
-            return Err(FieldError::new(
-                at("cruise_speed"),
-                format!(
-                    "{} exceeds vehicle.max_speed {}",
-                    pc.cruise_speed, v.max_speed
-                ),
-            ));
+        for (k, v) in [
+            ("passage_speed", pc.passage_speed),
+            ("cruise_speed", pc.cruise_speed),
+            ("align_speed", pc.align_speed),
+            ("reverse_speed", pc.reverse_speed),
+        ] {
+            up_to_max_speed(&at(k), v, max_speed)?;
         }
-        positive_up_to(&at("steer_usage"), pc.steer_usage, 1.0, "")?;
-        within(&at("final_approach"), pc.final_approach, 0.0, 100.0, "m")?;
         if pc.pace_fractions.is_empty() || pc.pace_fractions.len() > 32 {
             return Err(FieldError::new(
                 at("pace_fractions"),
@@ -517,29 +485,11 @@ impl ControllerConfig {
             ));
         }
         for (i, f) in pc.pace_fractions.iter().enumerate() {
-            positive_up_to(&at("pace_fractions").index(i), *f, 1.0, "")?;
+            crate::ranges::PACE_FRACTION.check(&at("pace_fractions").index(i), *f)?;
         }
-        within(
-            &at("moving_time_margin_s"),
-            pc.moving_time_margin_s,
-            0.0,
-            10.0,
-            "s",
-        )?;
-        within(&at("moving_margin"), pc.moving_margin, 0.0, 5.0, "m")?;
-        within(
-            &at("pace_time_weight"),
-            pc.pace_time_weight,
-            0.0,
-            1e6,
-            "m^3/s",
-        )?;
         positive_up_to(&at("align_enter_deg"), pc.align_enter_deg, 90.0, "degrees")?;
         positive_up_to(&at("align_exit_deg"), pc.align_exit_deg, 90.0, "degrees")?;
-        if !(pc.align_exit_deg > 0.0
-            && pc.align_exit_deg < pc.align_enter_deg
-            && pc.align_enter_deg < 90.0)
-        {
+        if !(pc.align_exit_deg < pc.align_enter_deg && pc.align_enter_deg < 90.0) {
             return Err(FieldError::new(
                 at("align_enter_deg"),
                 format!(
@@ -548,76 +498,17 @@ impl ControllerConfig {
                 ),
             ));
         }
-        positive(&at("align_speed"), pc.align_speed)?;
-        if pc.align_speed > v.max_speed {
-            return Err(FieldError::new(
-                at("align_speed"),
-                format!(
-                    "{} exceeds vehicle.max_speed {}",
-                    pc.align_speed, v.max_speed
-                ),
-            ));
-        }
-        positive_up_to(&at("recover_after_s"), pc.recover_after_s, 60.0, "s")?;
-        positive_up_to(&at("reverse_distance_m"), pc.reverse_distance_m, 10.0, "m")?;
-        positive_up_to(&at("reverse_speed"), pc.reverse_speed, 2.0, "m/s")?;
-        if pc.reverse_speed > v.max_speed {
-            return Err(FieldError::new(
-                at("reverse_speed"),
-                format!(
-                    "{} exceeds vehicle.max_speed {}",
-                    pc.reverse_speed, v.max_speed
-                ),
-            ));
-        }
-        within(
-            &at("max_reversals"),
-            f64::from(pc.max_reversals),
-            0.0,
-            10.0,
-            "",
-        )?;
-        positive_up_to(&at("reversal_reset_m"), pc.reversal_reset_m, 1000.0, "m")?;
-
-        let f = &self.follower;
-        let at = |k: &'static str| FieldPath::of(&["follower", k]);
-        positive_up_to(&at("omega"), f.omega, 20.0, "rad/s")?;
-        positive_up_to(&at("zeta"), f.zeta, 10.0, "")?;
-        positive_up_to(&at("max_lateral_accel"), f.max_lateral_accel, 20.0, "m/s^2")?;
-        positive_up_to(&at("decel"), f.decel, 10.0, "m/s^2")?;
-        // The DBC's AccelLimit range (0: the ECU's own limit).
-        within(&at("accel_limit"), f.accel_limit, 0.0, 5.0, "m/s^2")?;
-        if f.kind == FollowerKind::Anfis && f.anfis_model.is_none() {
-            return Err(FieldError::new(
-                at("anfis_model"),
-                "is required when follower.kind = \"anfis\"",
-            ));
-        }
-
-        let s = &self.safety;
-        let at = |k: &'static str| FieldPath::of(&["safety", k]);
-        within(&at("gps_rate_hz"), s.gps_rate_hz, 1.0, 20.0, "Hz")?;
-        if let Some(t) = s.gps_timeout_s {
-            positive_up_to(&at("gps_timeout_s"), t, 10.0, "s")?;
-            if t * s.gps_rate_hz < 1.0 {
-                return Err(FieldError::new(
-                    at("gps_timeout_s"),
-                    format!(
-                        "{t} s is shorter than one epoch at safety.gps_rate_hz = {} Hz",
-                        s.gps_rate_hz
-                    ),
-                ));
-            }
-        }
-        positive_up_to(&at("laser_timeout_s"), s.laser_timeout_s, 10.0, "s")?;
-        positive_up_to(&at("report_timeout_s"), s.report_timeout_s, 10.0, "s")?;
-        within(&at("settle_s"), s.settle_s, 0.0, 10.0, "s")?;
-
-        self.perception.validate().map_err(|e| match e {
-            crate::perception::PerceptionError::InvalidConfig { field, message } => {
-                FieldError::new(FieldPath::of(&["perception", field]), message)
-            }
-            other => FieldError::new(FieldPath::of(&["perception"]), other.to_string()),
-        })
+        Ok(())
     }
+}
+
+/// A speed (its range checked by the table) that must not exceed the top speed.
+fn up_to_max_speed(path: &FieldPath, v: f64, max_speed: f64) -> Result<(), FieldError> {
+    if v > max_speed {
+        return Err(FieldError::new(
+            path.clone(),
+            format!("{v} exceeds vehicle.max_speed {max_speed}"),
+        ));
+    }
+    Ok(())
 }

@@ -38,6 +38,26 @@ const ENABLE_TIMEOUT: f64 = 1.0;
 /// Below this speed the car counts as stopped, m/s.
 const STOPPED: f64 = 0.05;
 
+/// A stop the speed loop alone cannot make in time brakes: it aims this far short of
+/// the stop, metres...
+const STOP_MARGIN_M: f64 = 0.3;
+/// ...with this much more brake than the calibrated deceleration says it needs.
+const BRAKE_MARGIN: f64 = 1.25;
+
+/// The brake a car at wheel speed `v` needs to stop within `room` metres, percent: none
+/// while the deceleration the speed profile plans with (`follower.decel`) is enough;
+/// otherwise what stops it [`STOP_MARGIN_M`] short with the brake's calibrated
+/// deceleration (`vehicle.brake_decel`), [`BRAKE_MARGIN`] times over. A drive that
+/// does not slow (a stuck throttle) so meets a commanded brake, which the actuator
+/// monitor expects to see work (`monitor.rs`).
+fn stop_brake(v: f64, room: f64, cfg: &ControllerConfig) -> f64 {
+    let needed = v * v / (2.0 * (room - STOP_MARGIN_M).max(0.05));
+    if needed <= cfg.follower.decel {
+        return 0.0;
+    }
+    (BRAKE_MARGIN * needed / cfg.vehicle.brake_decel * 100.0).min(100.0)
+}
+
 /// Why the controller could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum ControllerError {
@@ -194,7 +214,7 @@ impl Controller {
             ecu_fault: None,
             last_scan: None,
             ready_since: None,
-            monitor: Default::default(),
+            monitor: crate::monitor::ActuatorMonitor::new(&cfg.vehicle),
             obstacles: Vec::new(),
             stop_reason: None,
             next_heartbeat: 0.0,
@@ -625,6 +645,7 @@ impl Controller {
                         Guidance::Drive {
                             steer,
                             speed,
+                            room,
                             inputs,
                         } => {
                             self.stop_reason = None;
@@ -640,10 +661,11 @@ impl Controller {
                                 steer_cmd: wanted.to_radians(),
                                 speed_cmd: speed,
                             });
+                            let brake = stop_brake(self.speed(), room, &self.cfg);
                             (
                                 ControllerHeartbeatState::Auto,
                                 (true, steer_deg),
-                                (true, speed, 0.0),
+                                (true, speed, brake),
                             )
                         }
                         Guidance::Reverse { steer, speed } => {

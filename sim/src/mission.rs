@@ -1,6 +1,6 @@
 //! What the controller is told about a scenario: the mission (datum, start, goal) and
 //! the vehicle's calibration (geometry, antenna and laser mounting, the steering's
-//! dead time and time constant), exactly as a field team would configure the car.
+//! dead time and time constant, the brake's deceleration), exactly as a field team would configure the car.
 //! Nothing else of the scenario (obstacles, noise, the steering sensor's bias) reaches
 //! the controller except through its sensors.
 
@@ -40,6 +40,7 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.steer_time_constant_s = scenario.steering.time_constant_s;
     v.speed_dead_time_s = scenario.throttle.dead_time_s;
     v.speed_time_constant_s = scenario.throttle.time_constant_s;
+    v.brake_decel = scenario.throttle.brake_decel;
     cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
     if let Some(r) = scenario.controller.detection_radius {
         cfg.perception.detection_radius = r;

@@ -117,6 +117,10 @@ pub enum Guidance {
         steer: f64,
         /// Speed, m/s.
         speed: f64,
+        /// The distance the car must be able to stop within (the goal, or the path's
+        /// end: where the next replanning may find no way on), metres; infinite when
+        /// no stop lies ahead.
+        room: f64,
         inputs: FollowInputs,
     },
     /// Back out of a dead end in gear R ([`Reverse`]).
@@ -706,6 +710,7 @@ impl Navigator {
             return Guidance::Drive {
                 steer,
                 speed: self.cfg.planner.align_speed.min(self.cfg.vehicle.max_speed),
+                room: f64::INFINITY,
                 inputs: FollowInputs {
                     e_y: 0.0,
                     e_theta: theta,
@@ -764,6 +769,7 @@ impl Navigator {
         } else {
             f64::INFINITY
         };
+        let room = to_goal.min(path.x_f() - x);
         let speed = pace
             .min(passage)
             .min(
@@ -772,14 +778,14 @@ impl Navigator {
                     .unwrap_or(f64::INFINITY),
             )
             .min((f.max_lateral_accel / curvature).sqrt())
-            .min(stop_within(to_goal))
             // The path's end is where the next replanning may find no way on (a local
             // goal before a blocked goal or a wall): the car can always stop there.
-            .min(stop_within(path.x_f() - x))
+            .min(stop_within(room))
             .min(self.cfg.vehicle.max_speed);
         Guidance::Drive {
             steer,
             speed,
+            room,
             inputs,
         }
     }

@@ -187,7 +187,7 @@ impl Default for ThrottleConfig {
             time_constant_s: car.speed_time_constant_s,
             max_accel: 1.5,
             max_decel: 2.5,
-            brake_decel: 4.0,
+            brake_decel: car.brake_decel,
             throttle_per_speed: 12.0,
         }
     }
