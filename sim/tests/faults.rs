@@ -142,6 +142,106 @@ fn bad_fault_plans_are_refused_with_file_line_and_field() {
     );
 }
 
+/// Expectations that could not fail are refused at load: a `detected_by` that is no
+/// reaction code (the old substring match let `""` or `"e"` pass every fault), and an
+/// expectation about faults in a scenario without any.
+#[test]
+fn expectations_that_could_not_fail_are_refused_at_load() {
+    let outage = "[[faults]]\nkind = \"gps_outage\"\nat_s = 1.0\n";
+    for (table, want) in [
+        (
+            format!("{outage}[expect]\ndetected_by = \"\"\n"),
+            "t.toml:13: expect.detected_by: \"\" is not a reaction code",
+        ),
+        (
+            format!("{outage}[expect]\ndetected_by = \"e\"\n"),
+            "t.toml:13: expect.detected_by: \"e\" is not a reaction code",
+        ),
+        (
+            format!("{outage}[expect]\ndetected_by = \"controller: FAULT_REPORT gps_lost\"\n"),
+            "t.toml:13: expect.detected_by: \"controller: FAULT_REPORT gps_lost\" is not a reaction code",
+        ),
+        (
+            "[expect]\ndetected_within_s = 0.3\n".to_owned(),
+            "t.toml:10: expect.detected_within_s: an expectation about faults, and no [[faults]]",
+        ),
+        (
+            "[expect]\necus_stay_enabled = true\n".to_owned(),
+            "t.toml:10: expect.ecus_stay_enabled: an expectation about faults, and no [[faults]]",
+        ),
+    ] {
+        let err = Scenario::from_toml(&with_fault(&table), "t.toml")
+            .expect_err(&table)
+            .to_string();
+        assert!(err.contains(want), "{table}\n got: {err}\nwant: {want}");
+    }
+    // The codes are listed, and a code the DBC defines loads.
+    let err = Scenario::from_toml(
+        &with_fault(&format!("{outage}[expect]\ndetected_by = \"e\"\n")),
+        "t.toml",
+    )
+    .expect_err("e")
+    .to_string();
+    assert!(
+        err.contains("gps_lost") && err.contains("command_timeout"),
+        "{err}"
+    );
+    Scenario::from_toml(
+        &with_fault(&format!("{outage}[expect]\ndetected_by = \"gps_lost\"\n")),
+        "t.toml",
+    )
+    .expect("gps_lost is a reaction code");
+    // A plan file's [expect] may be about the scenario's faults; the scenario with the
+    // plan is checked as a whole.
+    let plan = PlanFile::from_toml("[expect]\nsafe_within_s = 0.5\n", "plan.toml")
+        .expect("a plan of expectations alone");
+    let err = Scenario::from_toml(&with_fault(""), "t.toml")
+        .expect("no faults")
+        .with_overrides(ugv_sim::scenario::Overrides {
+            faults: Some(plan),
+            ..Default::default()
+        })
+        .expect_err("expectation without faults")
+        .to_string();
+    assert!(
+        err.contains("expect.safe_within_s: an expectation about faults, and no [[faults]]"),
+        "{err}"
+    );
+}
+
+/// A fault that never took effect (1 ns long; a drop of probability 0) fails the run,
+/// with or without expectations.
+#[test]
+fn a_fault_that_injects_nothing_fails_the_run() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/suite/01-paper.toml"),
+    )
+    .expect("paper scenario")
+        + "\n[sim]\ntime_limit_s = 4.0\n[success]\nreach_goal = false\n\
+           [[faults]]\nkind = \"can_drop\"\nnode = \"steering\"\nprobability = 0.0\nat_s = 1.0\n\
+           [[faults]]\nkind = \"gps_outage\"\nat_s = 2.0\nduration_s = 1e-9\n";
+    let sc = Scenario::from_toml(&text, "t.toml").expect("scenario");
+    let cfg = ugv_sim::mission::controller_config(&sc, FollowerKind::Optimal);
+    let run = ugv_sim::sil::run_sil(sc.clone(), &cfg).expect("run");
+    let v = ugv_sim::verdict::Verdict::judge(
+        ugv_sim::Mode::Sil,
+        &sc,
+        run.sim.report(run.outcome),
+        Some(&run.trace),
+    );
+    assert!(!v.passed, "{:?}", v.failures);
+    for want in [
+        "faults[0] can_drop at 1.00 s: fault never injected",
+        "faults[1] gps_outage at 2.00 s: fault never injected",
+    ] {
+        assert!(
+            v.failures.iter().any(|f| f.starts_with(want)),
+            "{want}: {:?}",
+            v.failures
+        );
+    }
+}
+
 /// Each frame the injector corrupts is a frame the controller's receiver rejects, for
 /// the reason injected (counted over the whole run, after the fault has ended).
 #[test]

@@ -3,7 +3,9 @@
 //! controller and the ECUs did about it, and the figures of the verdict. The same
 //! injector runs in SIL and HIL: `Sim::step` consults it at the wire seam.
 
-use golf_car_can::{ControllerHeartbeatState, FaultReportSource, GolfCarMessage};
+use std::collections::BTreeSet;
+
+use golf_car_can::{ControllerHeartbeatState, FaultReportCode, FaultReportSource, GolfCarMessage};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
@@ -63,6 +65,8 @@ struct Reaction {
     /// The episode's latest sighting.
     last_s: f64,
     what: String,
+    /// The code it names (see [`reaction_codes`]).
+    code: &'static str,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -319,12 +323,14 @@ impl Injector {
                         at_s: now,
                         last_s: now,
                         what: "controller: estop".to_owned(),
+                        code: ControllerHeartbeatState::Estop.label(),
                     });
                 }
                 self.last_state = Some(h.state);
             }
             GolfCarMessage::FaultReport(f) if f.source == FaultReportSource::Controller => {
-                let what = format!("controller: FAULT_REPORT {}", code_name(f.code));
+                let code = f.code.label();
+                let what = format!("controller: FAULT_REPORT {code}");
                 match self.reactions.iter_mut().rev().find(|r| r.what == what) {
                     // The same episode while the reports keep coming.
                     Some(r) if now - r.last_s < REPORT_EPISODE_S => r.last_s = now,
@@ -332,6 +338,7 @@ impl Injector {
                         at_s: now,
                         last_s: now,
                         what,
+                        code,
                     }),
                 }
             }
@@ -535,6 +542,7 @@ impl Injector {
                         steering_trip_ms: None,
                         throttle_trip_ms: None,
                         reactions: Vec::new(),
+                        reaction_codes: Vec::new(),
                     };
                 };
                 let after = |entries: &[(f64, Option<Cause>)]| {
@@ -551,28 +559,29 @@ impl Injector {
                         .find(|(at, c)| *at + 1e-9 >= start && c.is_some())
                         .map(|(at, _)| (at - start) * 1e3)
                 };
-                let mut candidates: Vec<(f64, String)> = self
+                // (time, what, code): a commanded disable names no code.
+                let mut candidates: Vec<(f64, String, Option<&'static str>)> = self
                     .reactions
                     .iter()
                     .filter(|x| x.at_s + 1e-9 >= start)
-                    .map(|x| (x.at_s, x.what.clone()))
+                    .map(|x| (x.at_s, x.what.clone(), Some(x.code)))
                     .collect();
                 for (name, e) in [("steering", s), ("throttle", t)] {
                     if let Some((at, cause)) = e {
+                        let code = cause.map(cause_name);
                         candidates.push((
                             at,
-                            format!(
-                                "{name} ECU: {}",
-                                cause.map_or("disabled".to_owned(), |c| cause_name(c).to_owned())
-                            ),
+                            format!("{name} ECU: {}", code.unwrap_or("disabled")),
+                            code,
                         ));
                     }
                 }
                 candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
                 let reactions = candidates
                     .iter()
-                    .map(|(at, what)| format!("{what} (+{:.0} ms)", (at - start) * 1e3))
+                    .map(|(at, what, _)| format!("{what} (+{:.0} ms)", (at - start) * 1e3))
                     .collect();
+                let reaction_codes = candidates.iter().filter_map(|c| c.2).collect();
                 let first = candidates.into_iter().next();
                 FaultRecord {
                     fault: f.clone(),
@@ -587,6 +596,7 @@ impl Injector {
                     steering_trip_ms: tripped(steering),
                     throttle_trip_ms: tripped(throttle),
                     reactions,
+                    reaction_codes,
                 }
             })
             .collect()
@@ -617,6 +627,10 @@ pub struct FaultRecord {
     pub throttle_trip_ms: Option<f64>,
     /// Every reaction from its start on, in order, with its time after the start.
     pub reactions: Vec<String>,
+    /// The codes these reactions name, in order (a commanded disable names none):
+    /// what `[expect] detected_by` must equal.
+    #[serde(skip)]
+    pub reaction_codes: Vec<&'static str>,
 }
 
 /// The expectations `expect` that the injected faults `records` did not meet, one
@@ -636,6 +650,11 @@ pub fn unmet(
             ));
             continue;
         };
+        if r.injected == 0 {
+            out.push(format!(
+                "{name} at {start:.2} s: fault never injected (it altered, dropped or added nothing while in force)"
+            ));
+        }
         if let Some(limit) = expect.detected_within_s {
             match r.detection_ms {
                 Some(ms) if ms <= limit * 1e3 + 1e-6 => {}
@@ -648,7 +667,7 @@ pub fn unmet(
             }
         }
         if let Some(want) = &expect.detected_by
-            && !r.reactions.iter().any(|d| d.contains(want.as_str()))
+            && !r.reaction_codes.contains(&want.as_str())
         {
             out.push(format!(
                 "{name}: no reaction names {want}; the reactions: {}",
@@ -688,19 +707,26 @@ pub fn unmet(
     out
 }
 
-/// The DBC's name of a FAULT_REPORT code.
-fn code_name(code: golf_car_can::FaultReportCode) -> String {
-    let debug = format!("{code:?}");
-    // CamelCase to the DBC's snake_case.
-    let mut out = String::new();
-    for (i, c) in debug.chars().enumerate() {
-        if c.is_uppercase() && i > 0 {
-            out.push('_');
-        }
-        out.push(c.to_ascii_lowercase());
-    }
-    out
+/// The codes a reaction can name, which `[expect] detected_by` must be one of: the
+/// DBC's FAULT_REPORT codes (the controller's reports; its estop is `estop`) and the
+/// faults an ECU enters its safe state for.
+pub fn reaction_codes() -> BTreeSet<&'static str> {
+    FaultReportCode::ALL
+        .iter()
+        .map(|c| c.label())
+        .chain(ECU_CAUSES.iter().map(|&c| cause_name(c)))
+        .collect()
 }
+
+/// Every fault an ECU enters its safe state for (what [`cause_name`] names).
+const ECU_CAUSES: [Cause; 6] = [
+    Cause::CommandTimeout,
+    Cause::HeartbeatTimeout,
+    Cause::Estop,
+    Cause::FaultReport,
+    Cause::SecondSender,
+    Cause::Actuator,
+];
 
 fn cause_name(c: Cause) -> &'static str {
     match c {
@@ -758,15 +784,87 @@ mod tests {
         assert!(ray_circle(0.5, 5.0, 0.0, 1.0).is_none());
     }
 
+    /// A started fault's record with `injected` and the reactions naming `codes`.
+    fn record(injected: u64, codes: &[&'static str]) -> FaultRecord {
+        FaultRecord {
+            fault: Fault {
+                kind: FaultKind::GpsOutage,
+                start: Start::At(1.0),
+                duration_s: Some(2.0),
+            },
+            started_s: Some(1.0),
+            ended_s: Some(3.0),
+            injected,
+            detected_by: codes
+                .first()
+                .map(|c| format!("controller: FAULT_REPORT {c}")),
+            detected_s: Some(1.2),
+            detection_ms: Some(200.0),
+            steering_safe_ms: None,
+            throttle_safe_ms: None,
+            steering_trip_ms: None,
+            throttle_trip_ms: None,
+            reactions: codes
+                .iter()
+                .map(|c| format!("controller: FAULT_REPORT {c} (+200 ms)"))
+                .collect(),
+            reaction_codes: codes.to_vec(),
+        }
+    }
+
     #[test]
-    fn fault_report_codes_are_named_as_in_the_dbc() {
+    fn detected_by_matches_a_reaction_code_exactly_not_a_part_of_one() {
+        let expect = |code: &str| super::super::Expectations {
+            detected_by: Some(code.to_owned()),
+            ..Default::default()
+        };
+        let records = [record(10, &["gps_lost"])];
         assert_eq!(
-            code_name(golf_car_can::FaultReportCode::GpsLost),
-            "gps_lost"
+            unmet(&expect("gps_lost"), &records, None),
+            Vec::<String>::new()
         );
+        let failures = unmet(&expect("gps_degraded"), &records, None);
         assert_eq!(
-            code_name(golf_car_can::FaultReportCode::E2eErrors),
-            "e2e_errors"
+            failures,
+            [
+                "faults[0] gps_outage: no reaction names gps_degraded; the reactions: controller: FAULT_REPORT gps_lost (+200 ms)"
+            ]
+        );
+        // A part of the code named (the old substring match passed it).
+        let failures = unmet(&expect("gps"), &records, None);
+        assert!(
+            failures[0].contains("no reaction names gps;"),
+            "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn a_fault_that_never_took_effect_fails_the_run() {
+        let expect = super::super::Expectations::default();
+        assert_eq!(
+            unmet(&expect, &[record(1, &[])], None),
+            Vec::<String>::new()
+        );
+        let failures = unmet(&expect, &[record(0, &[])], None);
+        assert_eq!(failures.len(), 1, "{failures:?}");
+        assert!(
+            failures[0].starts_with("faults[0] gps_outage at 1.00 s: fault never injected"),
+            "{failures:?}"
+        );
+    }
+
+    #[test]
+    fn reaction_codes_are_the_dbc_report_codes_and_the_ecu_causes() {
+        let codes = reaction_codes();
+        for code in ["gps_lost", "e2e_errors", "estop", "report_timeout"] {
+            assert!(codes.contains(code), "{code}: {codes:?}");
+        }
+        for code in ["command_timeout", "fault_report", "actuator_fault"] {
+            assert!(codes.contains(code), "{code}: {codes:?}");
+        }
+        assert!(
+            !codes.contains("disabled") && !codes.contains(""),
+            "{codes:?}"
         );
     }
 }

@@ -670,8 +670,10 @@ pub struct Expectations {
     /// to each fault within this time of its start, seconds.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detected_within_s: Option<f64>,
-    /// Some reaction after each fault's start names this (a FAULT_REPORT code such as
-    /// `gps_lost`, `estop`, an ECU's fault such as `command_timeout`).
+    /// Some reaction after each fault's start names exactly this code: a FAULT_REPORT
+    /// code of the DBC (`gps_lost`, `estop`, ...; the controller's estop is `estop`)
+    /// or the fault an ECU entered its safe state for (`command_timeout`,
+    /// `actuator_fault`, ...): one of [`super::inject::reaction_codes`], checked at load.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detected_by: Option<String>,
     /// Both ECUs report their safe state within this time of each fault's start, s.
@@ -685,7 +687,32 @@ pub struct Expectations {
 }
 
 impl Expectations {
+    /// The first expectation about the faults that is set (`bus_overloaded`, about the
+    /// schedule, is judged with or without faults), by key.
+    fn first_about_faults(&self) -> Option<&'static str> {
+        [
+            ("detected_within_s", self.detected_within_s.is_some()),
+            ("detected_by", self.detected_by.is_some()),
+            ("safe_within_s", self.safe_within_s.is_some()),
+            ("ecus_stay_enabled", self.ecus_stay_enabled),
+        ]
+        .into_iter()
+        .find_map(|(key, set)| set.then_some(key))
+    }
+
     pub fn validate(&self, path: &FieldPath) -> Result<(), FieldError> {
+        if let Some(code) = &self.detected_by {
+            let codes = super::inject::reaction_codes();
+            if !codes.contains(code.as_str()) {
+                return Err(FieldError::new(
+                    path.key("detected_by"),
+                    format!(
+                        "{code:?} is not a reaction code (matched exactly); the codes: {}",
+                        codes.into_iter().collect::<Vec<_>>().join(", ")
+                    ),
+                ));
+            }
+        }
         if let Some(t) = self.detected_within_s {
             positive_up_to(&path.key("detected_within_s"), t, 600.0, "s")?;
         }
@@ -702,8 +729,21 @@ impl Expectations {
     }
 }
 
-/// Validate a plan: every fault typed, at most [`MAX_FAULTS`].
+/// Validate a scenario's plan: [`validate_parts`], and, when an expectation is about
+/// the faults, faults for it to judge (without any it would pass whatever happened).
 pub fn validate_plan(faults: &[FaultSpec], expect: &Expectations) -> Result<(), FieldError> {
+    validate_parts(faults, expect)?;
+    match expect.first_about_faults() {
+        Some(key) if faults.is_empty() => Err(FieldError::new(
+            FieldPath::of(&["expect"]).key(key),
+            "an expectation about faults, and no [[faults]] to judge it by (it could not fail)",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Every fault typed, at most [`MAX_FAULTS`], the expectations valid.
+fn validate_parts(faults: &[FaultSpec], expect: &Expectations) -> Result<(), FieldError> {
     let root = FieldPath::of(&["faults"]);
     if faults.len() > MAX_FAULTS {
         return Err(FieldError::new(
@@ -742,7 +782,10 @@ impl PlanFile {
     /// Parse and validate TOML text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<PlanFile, ScenarioError> {
         let plan: PlanFile = parse_toml(text, file)?;
-        validate_plan(&plan.faults, &plan.expect.clone().unwrap_or_default())
+        // Its [expect] may be about the scenario's faults alone: the scenario with the
+        // plan is validated as a whole (`Scenario::with_overrides`), which refuses an
+        // expectation with no fault at all.
+        validate_parts(&plan.faults, &plan.expect.clone().unwrap_or_default())
             .map_err(|e| e.located(text, file))?;
         Ok(plan)
     }
