@@ -29,7 +29,7 @@ use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
 use ugv_controller::record::{RunInfo, Writer};
-use ugv_controller::runtime::Runtime;
+use ugv_controller::runtime::{Runtime, SIMULATOR_PID_ENV};
 use ugv_controller::trace::TraceWriter;
 
 #[derive(Parser, Debug)]
@@ -264,6 +264,7 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
+    end_with_simulator()?;
 
     let mut rt = Runtime::new(ctl, gps, laser, can).with_fix_timing();
     if let Some(w) = trace {
@@ -364,4 +365,26 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         );
     }
     Ok(ExitCode::from(exit.code()))
+}
+
+/// A controller the simulator started (its pid in [`SIMULATOR_PID_ENV`]) ends with it:
+/// the kernel sends it SIGTERM when that process dies, which stops the loop as Ctrl-C
+/// does (estop heartbeats, then exit), so no orphan keeps talking on the bus. If the
+/// simulator is gone already (it died between the fork and here), it does not start.
+fn end_with_simulator() -> anyhow::Result<()> {
+    let Some(value) = std::env::var_os(SIMULATOR_PID_ENV) else {
+        return Ok(());
+    };
+    let pid: i32 = value
+        .to_str()
+        .and_then(|v| v.parse().ok())
+        .with_context(|| format!("{SIMULATOR_PID_ENV}={value:?}: not a process id"))?;
+    nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
+        .context("asking for SIGTERM when the simulator ends")?;
+    let parent = nix::unistd::getppid().as_raw();
+    anyhow::ensure!(
+        parent == pid,
+        "started by the simulator (pid {pid}), which is gone (the parent is now pid {parent})"
+    );
+    Ok(())
 }

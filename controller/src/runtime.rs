@@ -38,6 +38,12 @@ use crate::trace::{FixTiming, Trace, TraceWriter};
 /// the silence that follows.
 pub const LOST_PORT_GRACE: f64 = 0.5;
 
+/// The environment variable through which the simulator that starts a controller
+/// (`ugv-sim run --controller`) gives it its process id: the controller then ends
+/// with that process (`ugv-controller run`, the parent-death signal), and refuses to
+/// start when it is already gone.
+pub const SIMULATOR_PID_ENV: &str = "UGV_SIM_PID";
+
 /// How long the loop sends estop heartbeats after a stop was requested, seconds.
 pub const STOP_GRACE: f64 = 0.1;
 

@@ -80,6 +80,46 @@ pub fn workspace_bin(name: &str) -> anyhow::Result<PathBuf> {
     Ok(bin)
 }
 
+/// The pid of `parent`'s child process named `name` (from /proc).
+pub fn child_named(parent: u32, name: &str) -> Option<i32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid ...
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        let comm = &stat[open + 1..close];
+        let ppid = stat[close + 1..].split_whitespace().nth(1);
+        if name.starts_with(comm) && ppid == Some(&parent.to_string()) {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+/// Whether process `pid` has ended (gone from /proc, or a zombie nobody reaped yet).
+pub fn process_ended(pid: i32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => true,
+        Ok(stat) => stat
+            .rfind(')')
+            .and_then(|close| stat[close + 1..].split_whitespace().next())
+            .is_none_or(|state| state == "Z" || state == "X"),
+    }
+}
+
+/// Control ticks a controller has driven, from the trace it writes as it goes.
+pub fn samples_written(trace: &std::path::Path) -> usize {
+    std::fs::read_to_string(trace)
+        .map(|t| t.lines().filter(|l| l.starts_with("{\"sample\"")).count())
+        .unwrap_or(0)
+}
+
 /// A software null-modem cable: two pseudo-terminals whose masters are joined, so a
 /// program that opens `a` (say, the simulator writing its NMEA to a "physical" serial
 /// device) talks to one that opens `b` (the controller), both through real tty

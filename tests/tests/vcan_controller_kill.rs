@@ -12,29 +12,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
-use ugv_e2e_tests::{TestVcan, workspace_bin};
-
-/// The pid of `parent`'s child process named `name` (from /proc).
-fn child_named(parent: u32, name: &str) -> Option<i32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
-            continue;
-        };
-        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
-            continue;
-        };
-        // pid (comm) state ppid ...
-        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
-            continue;
-        };
-        let comm = &stat[open + 1..close];
-        let ppid = stat[close + 1..].split_whitespace().nth(1);
-        if name.starts_with(comm) && ppid == Some(&parent.to_string()) {
-            return Some(pid);
-        }
-    }
-    None
-}
+use ugv_e2e_tests::{TestVcan, child_named, samples_written, workspace_bin};
 
 struct Trial {
     kill_at_s: f64,
@@ -47,13 +25,6 @@ struct Trial {
 /// A file of the trial's folder, as text (empty when missing).
 fn read(dir: &tempfile::TempDir, name: &str) -> String {
     std::fs::read_to_string(dir.path().join(name)).unwrap_or_default()
-}
-
-/// Control ticks the controller has driven, from the trace it writes as it goes.
-fn samples_written(trace: &std::path::Path) -> usize {
-    std::fs::read_to_string(trace)
-        .map(|t| t.lines().filter(|l| l.starts_with("{\"sample\"")).count())
-        .unwrap_or(0)
 }
 
 fn trial(vcan: &TestVcan, i: usize, kill_after_samples: usize) -> Result<Trial> {

@@ -24,7 +24,10 @@ use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
-pub use process::{ControllerProcess, spawn_controller, wait_for_controller};
+pub use process::{
+    ControllerProcess, close_on_exec_all, ensure_no_controller, spawn_controller,
+    wait_for_controller,
+};
 pub use wires::{WireMap, Wires, gateway_log};
 
 use crate::devices::gps::GpsError;
@@ -65,6 +68,16 @@ pub enum HilError {
     },
     #[error("no controller heartbeat on {iface} within {seconds} s")]
     NoController { iface: String, seconds: u64 },
+    #[error(
+        "CAN interface {iface}: another controller is on the bus ({heartbeats} CONTROLLER_HEARTBEAT frames in {listened_ms} ms, state {state}); stop it before starting a run ({running})"
+    )]
+    BusTaken {
+        iface: String,
+        heartbeats: usize,
+        listened_ms: u128,
+        state: String,
+        running: String,
+    },
     #[error("devices.controller is on a board: the simulator cannot start it (drop --controller)")]
     BoardControllerStarted,
     #[error(
@@ -390,6 +403,7 @@ pub fn run_scenario(
     let _ = std::fs::remove_file(&trace_path);
     let mut controller = match &options.controller {
         Some(binary) => {
+            ensure_no_controller(&iface)?;
             log(&format!(
                 "starting {} (configuration {})",
                 binary.display(),

@@ -9,6 +9,8 @@ use std::time::{Duration, Instant};
 use firmware_bridge::{CanPort, Received};
 use golf_car_can::GolfCarMessage;
 
+use ugv_controller::runtime::SIMULATOR_PID_ENV;
+
 use super::HilError;
 use super::wires::WireMap;
 
@@ -44,6 +46,77 @@ pub fn wait_for_controller(
     })
 }
 
+/// How long a run listens for another controller on its bus before it starts its
+/// own: five heartbeat periods.
+const BUS_LISTEN: Duration = Duration::from_millis(100);
+
+/// Refuse to start a controller on `iface` while another controller's heartbeats are
+/// on it (an orphan of an earlier run, a controller started by hand): two would fight
+/// over the ECUs, and the ECUs would go to their safe state for a second sender. The
+/// error says what was heard and which controller processes run on this machine.
+pub fn ensure_no_controller(iface: &str) -> Result<(), HilError> {
+    let can = |source| HilError::Can {
+        iface: iface.to_owned(),
+        source,
+    };
+    let mut port = CanPort::open(iface).map_err(can)?;
+    let deadline = Instant::now() + BUS_LISTEN;
+    let mut heard = Vec::new();
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        if let Some(Received::Message(GolfCarMessage::ControllerHeartbeat(h))) =
+            port.recv(left).map_err(can)?
+        {
+            heard.push(h.state);
+        }
+    }
+    let Some(state) = heard.last() else {
+        return Ok(());
+    };
+    let running = processes_named("ugv-controller");
+    Err(HilError::BusTaken {
+        iface: iface.to_owned(),
+        heartbeats: heard.len(),
+        listened_ms: BUS_LISTEN.as_millis(),
+        state: format!("{state:?}").to_lowercase(),
+        running: if running.is_empty() {
+            "no ugv-controller process on this machine: another machine or a board sends them".to_owned()
+        } else {
+            running.join("; ")
+        },
+    })
+}
+
+/// The processes whose name is `name`, as "pid N: command line".
+fn processes_named(name: &str) -> Vec<String> {
+    let Ok(dir) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    let mut found: Vec<String> = dir
+        .flatten()
+        .filter_map(|entry| {
+            let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+            let comm = std::fs::read_to_string(entry.path().join("comm")).ok()?;
+            // comm holds at most 15 bytes of the name.
+            if !name.starts_with(comm.trim_end()) || comm.trim_end().is_empty() {
+                return None;
+            }
+            let cmdline = std::fs::read(entry.path().join("cmdline")).ok()?;
+            let args: Vec<String> = cmdline
+                .split(|b| *b == 0)
+                .filter(|a| !a.is_empty())
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect();
+            Some(format!("pid {pid}: {}", args.join(" ")))
+        })
+        .collect();
+    found.sort();
+    found
+}
+
 /// A controller process started for the run.
 #[derive(Debug)]
 pub struct ControllerProcess {
@@ -69,7 +142,12 @@ pub fn spawn_controller(
         Some(dir) if !own_log => vec!["--log".as_ref(), dir.as_os_str()],
         _ => Vec::new(),
     };
+    close_on_exec_all().map_err(|source| HilError::Spawn {
+        binary: binary.display().to_string(),
+        source,
+    })?;
     let child = Command::new(binary)
+        .env(SIMULATOR_PID_ENV, std::process::id().to_string())
         .arg("run")
         .arg("--config")
         .arg(config)
@@ -99,6 +177,38 @@ pub fn spawn_controller(
     })
 }
 
+/// Marks every descriptor of this process beyond standard input, output and error
+/// close-on-exec, so that a controller started next inherits none of the simulator's
+/// wires: the GPS pty's master (holding it, the controller would never see its GPS
+/// port close when the simulator dies), the CAN sockets, iceoryx2's files. Rust's own
+/// files and sockets are close-on-exec already; those opened through C libraries and
+/// crates that call `openpty`, `socket` or `open` directly are not. The wires are all
+/// open before the controller starts, so none is opened between this and the fork.
+#[allow(unsafe_code)] // fcntl on the descriptors /proc lists: nix needs a BorrowedFd, whose making from a number is unsafe too
+pub fn close_on_exec_all() -> std::io::Result<()> {
+    for entry in std::fs::read_dir("/proc/self/fd")? {
+        let Some(fd) = entry?
+            .file_name()
+            .to_str()
+            .and_then(|n| n.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        if fd <= 2 {
+            continue;
+        }
+        // SAFETY: F_GETFD and F_SETFD read and set one descriptor's flags and touch no
+        // memory; a descriptor closed since the listing (the listing's own) fails with
+        // EBADF, which leaves nothing to do.
+        let flags = unsafe { libc::fcntl(fd, libc::F_GETFD) };
+        if flags >= 0 && flags & libc::FD_CLOEXEC == 0 {
+            // SAFETY: as above.
+            unsafe { libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC) };
+        }
+    }
+    Ok(())
+}
+
 impl ControllerProcess {
     /// Ask the controller to finish (SIGINT: it leaves the car safe and writes its
     /// trace), then kill it if it has not gone within `grace`.
@@ -125,5 +235,43 @@ impl ControllerProcess {
         if let Ok(pid) = i32::try_from(self.child.id()) {
             let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), signal);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::os::fd::AsRawFd;
+
+    use super::*;
+
+    /// The descriptors a child started now holds, as `ls` sees them in its shell's
+    /// /proc entry.
+    fn child_descriptors() -> Vec<i32> {
+        let out = Command::new("sh")
+            .args(["-c", "ls /proc/$$/fd"])
+            .output()
+            .expect("sh runs");
+        String::from_utf8_lossy(&out.stdout)
+            .split_whitespace()
+            .filter_map(|n| n.parse().ok())
+            .collect()
+    }
+
+    #[test]
+    fn a_child_started_after_the_sweep_inherits_no_pty_of_the_simulator() {
+        // openpty gives descriptors without close-on-exec, as the GPS device's are.
+        let pty = nix::pty::openpty(None, None).expect("a pty");
+        let (master, slave) = (pty.master.as_raw_fd(), pty.slave.as_raw_fd());
+        let before = child_descriptors();
+        assert!(
+            before.contains(&master) && before.contains(&slave),
+            "the child holds {before:?} (master {master}, slave {slave})"
+        );
+        close_on_exec_all().expect("the sweep");
+        let after = child_descriptors();
+        assert!(
+            !after.contains(&master) && !after.contains(&slave),
+            "the child still holds {after:?} (master {master}, slave {slave})"
+        );
     }
 }
