@@ -13,6 +13,7 @@ pub mod localisation;
 pub mod monitor;
 pub mod perception;
 pub mod planner;
+pub mod ranges;
 pub mod record;
 pub mod route;
 pub mod runtime;

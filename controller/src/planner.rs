@@ -77,6 +77,10 @@ pub enum PlanError {
     /// l <= 0.
     #[error("wheelbase must be positive, got {value}")]
     NonPositiveWheelbase { value: f64 },
+    /// A physical input beyond its plausible range (`crate::ranges`), with the range
+    /// and its source.
+    #[error("{field}: {message}")]
+    OutOfRange { field: String, message: String },
     /// |theta| >= 90 degrees: tan(theta) and 1/cos(theta) blow up.
     #[error(
         "{field} = {value} rad: the heading must be within 90 degrees of the x axis (tan(theta) blows up); plan in a rotated frame"

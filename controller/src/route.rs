@@ -256,6 +256,28 @@ pub fn check_waypoints(
     Ok(())
 }
 
+/// The goal is not reached where the car starts: the mission is complete within
+/// `tolerance` of the goal wherever the car is (guidance measures the straight
+/// distance, whatever the route), so the start must lie farther than that from it.
+/// `at` names the tolerance's field.
+pub fn check_goal_not_at_start(
+    at: &FieldPath,
+    tolerance: f64,
+    start: (f64, f64),
+    goal: (f64, f64),
+) -> Result<(), FieldError> {
+    let distance = (goal.0 - start.0).hypot(goal.1 - start.1);
+    if distance > tolerance {
+        return Ok(());
+    }
+    Err(FieldError::new(
+        at.clone(),
+        format!(
+            "{tolerance} m reaches the start: the goal is {distance:.3} m from it, so it would be reached at t = 0 with a path of 0 m; it must be below the start-to-goal distance"
+        ),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

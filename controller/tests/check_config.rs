@@ -94,3 +94,27 @@ fn run_refuses_a_baud_rate_out_of_range_naming_it() -> Result<()> {
     );
     Ok(())
 }
+
+/// `ugv-controller plan` refuses a problem whose wheelbase no car has (it planned with
+/// 1e300 m), naming the field, the range and its source.
+#[test]
+fn plan_refuses_a_wheelbase_no_car_has() -> Result<()> {
+    let problem = |wheelbase: &str| {
+        format!(
+            r#"{{"state": {{"x": 0, "y": 0, "theta": 0, "phi": 0}},
+                "goal": {{"x": 30, "y": 0, "theta": 0, "phi": 0}},
+                "line_start": {{"x0": 0, "y0": 0}}, "t_k": 0, "t_f": 15,
+                "wheelbase": {wheelbase}, "vehicle_radius": 2, "obstacles": []}}"#
+        )
+    };
+    let (code, err) = controller(&["plan"], &problem("1e300"))?;
+    ensure!(code != Some(0), "plan accepted a 1e300 m wheelbase: {err}");
+    ensure!(
+        err.contains("wheelbase: must be within [0.5, 5] m, is 1e300")
+            && err.contains("(the golf car's is 1.6-1.7 m"),
+        "{err}"
+    );
+    let (code, err) = controller(&["plan"], &problem("1.65"))?;
+    ensure!(code == Some(0), "plan refused a golf car: {err}");
+    Ok(())
+}

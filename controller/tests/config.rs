@@ -97,6 +97,77 @@ fn the_fields_named_in_the_issue_are_refused() {
     }
 }
 
+/// Values no golf car has (issue: item 6): each refused with its field, its line, the
+/// range and the range's source.
+#[test]
+fn values_no_golf_car_has_are_refused_with_the_range_and_its_source() {
+    for (text, field, says) in [
+        (
+            "[vehicle]\nwheelbase = 1e-9\n",
+            "vehicle.wheelbase",
+            "must be within [0.5, 5] m, is 1e-9 (the golf car's is 1.6-1.7 m",
+        ),
+        (
+            "[vehicle]\nwheelbase = 1e300\n",
+            "vehicle.wheelbase",
+            "must be within [0.5, 5] m, is 1e300",
+        ),
+        (
+            "[vehicle]\nbrake_decel = 1e-9\n",
+            "vehicle.brake_decel",
+            "must be within [1, 10] m/s^2, is 1e-9 (the golf car brakes at about 4 m/s^2",
+        ),
+        (
+            "[vehicle]\nsteer_time_constant_s = 1e-9\n",
+            "vehicle.steer_time_constant_s",
+            "must be within [0.001, 2] s, is 1e-9 (the golf car's is 0.08 s",
+        ),
+        (
+            "[vehicle]\nmax_steer_deg = 50\n",
+            "vehicle.max_steer_deg",
+            "must be within [10, 45] degrees, is 50 (the DBC's STEERING_CMD.TargetAngle is +-45 degrees",
+        ),
+        (
+            "[safety]\ngps_rate_hz = 1e-9\n",
+            "safety.gps_rate_hz",
+            "must be within [1, 20] Hz, is 1e-9 (RTK receivers offer 1-20 Hz epochs)",
+        ),
+        (
+            "[planner]\nreplan_period_s = 1e-9\n",
+            "planner.replan_period_s",
+            "must be within [0.05, 5] s, is 1e-9 (the paper's T_s",
+        ),
+        (
+            "[follower]\ndecel = 1e-9\n",
+            "follower.decel",
+            "must be within [0.1, 10] m/s^2, is 1e-9 (about 1 g",
+        ),
+    ] {
+        let e = refused(text);
+        assert_eq!((e.field.as_str(), e.line), (field, 2), "{e}");
+        assert!(e.message.starts_with(says), "{e}");
+    }
+}
+
+#[test]
+fn a_goal_reached_at_the_start_is_refused_naming_the_tolerance() {
+    let mission = |tolerance: f64| {
+        format!(
+            "[mission]\nstart_x = 0.0\nstart_y = 0.0\ngoal_x = 3.0\ngoal_y = 4.0\ngoal_tolerance = {tolerance:?}\n"
+        )
+    };
+    for tolerance in [6.0, 5.0] {
+        let e = refused(&mission(tolerance));
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "c.toml:6: mission.goal_tolerance: {tolerance} m reaches the start: the goal is 5.000 m from it, so it would be reached at t = 0 with a path of 0 m; it must be below the start-to-goal distance"
+            )
+        );
+    }
+    assert!(ControllerConfig::from_toml(&mission(4.9), "c.toml").is_ok());
+}
+
 #[test]
 fn array_elements_are_named_by_index() {
     let e = refused("[planner]\npace_fractions = [1.0, 0.5, nan]\n");

@@ -780,6 +780,12 @@ fn bad_inputs_are_named() -> Result<()> {
     p.wheelbase = 0.0;
     expect(p, &|e| matches!(e, PlanError::NonPositiveWheelbase { .. }))?;
     let mut p = base.clone();
+    p.wheelbase = 1e300;
+    expect(p, &|e| {
+        matches!(e, PlanError::OutOfRange { field, message }
+            if field == "wheelbase" && message.starts_with("must be within [0.5, 5] m, is 1e300"))
+    })?;
+    let mut p = base.clone();
     p.line_start.x0 = 30.0;
     expect(p, &|e| matches!(e, PlanError::VerticalReferenceLine { .. }))?;
     let mut p = base.clone();

@@ -252,16 +252,21 @@ pub fn within(path: &FieldPath, v: f64, lo: f64, hi: f64, unit: &str) -> Result<
     if (lo..=hi).contains(&v) {
         Ok(())
     } else {
-        let unit = if unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {unit}")
-        };
         Err(FieldError::new(
             path.clone(),
-            format!("must be within [{lo}, {hi}]{unit}, is {v}"),
+            outside(lo, hi, unit, &v.to_string()),
         ))
     }
+}
+
+/// "must be within [lo, hi] unit, is v".
+fn outside(lo: f64, hi: f64, unit: &str, v: &str) -> String {
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    format!("must be within [{lo}, {hi}]{unit}, is {v}")
 }
 
 /// `v` is finite, above zero and at most `hi`.
@@ -289,6 +294,77 @@ pub fn size(path: &FieldPath, v: f64) -> Result<(), FieldError> {
 /// An angle in degrees: finite and within ±360.
 pub fn angle_deg(path: &FieldPath, v: f64) -> Result<(), FieldError> {
     within(path, v, -360.0, 360.0, "degrees")
+}
+
+/// The plausible range of a physical quantity: its bounds, its unit, and where the
+/// bounds come from (a datasheet, the DBC, the golf car), which a refusal quotes. A
+/// range is generous (other Ackermann carts, other scanners fit) but closed: a
+/// wheelbase of 1e-9 m or 1e300 m is no vehicle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Range {
+    pub lo: f64,
+    pub hi: f64,
+    pub unit: &'static str,
+    /// Where the bounds come from.
+    pub source: &'static str,
+}
+
+impl Range {
+    pub const fn new(lo: f64, hi: f64, unit: &'static str, source: &'static str) -> Range {
+        Range {
+            lo,
+            hi,
+            unit,
+            source,
+        }
+    }
+
+    /// `v` is finite and within the range; the refusal gives the range and its source,
+    /// and a value far from 1 in exponent form (`must be within [0.5, 5] m, is 1e-9
+    /// (the golf car: ...)`).
+    pub fn check(&self, path: &FieldPath, v: f64) -> Result<(), FieldError> {
+        finite(path, v)?;
+        if self.contains(v) {
+            return Ok(());
+        }
+        let shown = if v != 0.0 && !(1e-6..1e9).contains(&v.abs()) {
+            format!("{v:e}")
+        } else {
+            v.to_string()
+        };
+        Err(FieldError::new(
+            path.clone(),
+            format!(
+                "{} ({})",
+                outside(self.lo, self.hi, self.unit, &shown),
+                self.source
+            ),
+        ))
+    }
+
+    pub fn contains(&self, v: f64) -> bool {
+        (self.lo..=self.hi).contains(&v)
+    }
+}
+
+/// One row of a range table: a field (keys from the table's root), how to read it from
+/// a `T` (`None`: the field is not set, nothing to check), and its range.
+#[derive(Debug)]
+pub struct Bound<T> {
+    pub field: &'static [&'static str],
+    pub value: fn(&T) -> Option<f64>,
+    pub range: Range,
+}
+
+/// Every row of `table` checked against `t`, in order; the first field out of its
+/// range is the error.
+pub fn check_bounds<T>(t: &T, table: &[Bound<T>]) -> Result<(), FieldError> {
+    for row in table {
+        if let Some(v) = (row.value)(t) {
+            row.range.check(&FieldPath::of(row.field), v)?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -356,5 +432,54 @@ mod tests {
         assert!(size(&p, 1e7).is_err());
         let e = within(&p, 7.0, 0.0, 5.0, "m").err().map(|e| e.message);
         assert_eq!(e.as_deref(), Some("must be within [0, 5] m, is 7"));
+    }
+
+    #[test]
+    fn ranges_name_their_bounds_and_source_and_tables_check_every_row() {
+        struct Car {
+            wheelbase: f64,
+            limit: Option<f64>,
+        }
+        const TABLE: &[Bound<Car>] = &[
+            Bound {
+                field: &["vehicle", "wheelbase"],
+                value: |c| Some(c.wheelbase),
+                range: Range::new(0.5, 5.0, "m", "the golf car"),
+            },
+            Bound {
+                field: &["goal", "speed_limit"],
+                value: |c| c.limit,
+                range: Range::new(0.1, 10.0, "m/s", "the DBC"),
+            },
+        ];
+        let ok = Car {
+            wheelbase: 1.65,
+            limit: None,
+        };
+        assert_eq!(check_bounds(&ok, TABLE), Ok(()));
+        let e = check_bounds(
+            &Car {
+                wheelbase: 1e-9,
+                limit: None,
+            },
+            TABLE,
+        )
+        .err()
+        .map(|e| e.to_string());
+        assert_eq!(
+            e.as_deref(),
+            Some("vehicle.wheelbase: must be within [0.5, 5] m, is 1e-9 (the golf car)")
+        );
+        let e = check_bounds(
+            &Car {
+                limit: Some(f64::NAN),
+                ..ok
+            },
+            TABLE,
+        )
+        .err()
+        .map(|e| e.path.to_string());
+        assert_eq!(e.as_deref(), Some("goal.speed_limit"));
+        assert!(TABLE[0].range.contains(5.0) && !TABLE[0].range.contains(5.01));
     }
 }
