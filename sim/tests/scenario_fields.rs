@@ -6,7 +6,9 @@
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+use ugv_controller::config::FollowerKind;
 use ugv_sim::ScenarioError;
+use ugv_sim::mission::checked_controller_config;
 use ugv_sim::scenario::Scenario;
 
 /// Every floating-point field of the default scenario written out, as a path of keys
@@ -129,6 +131,90 @@ fn route_waypoints_and_the_perception_range_are_refused_with_their_line() {
     assert!(Scenario::from_toml("[controller]\ndetection_radius = 16.0\n", "ok.toml").is_ok());
 }
 
+/// Values no golf car has (issue: item 6), each refused with its field, its line, the
+/// range and the range's source.
+#[test]
+fn values_no_golf_car_has_are_refused_with_the_range_and_its_source() {
+    for (text, field, line, says) in [
+        (
+            "[vehicle]\nwheelbase = 1e-9\n",
+            "vehicle.wheelbase",
+            2,
+            "must be within [0.5, 5] m, is 1e-9 (the golf car's is 1.6-1.7 m",
+        ),
+        (
+            "[throttle]\nbrake_decel = 1e-9\n",
+            "throttle.brake_decel",
+            2,
+            "must be within [1, 10] m/s^2, is 1e-9 (the golf car brakes at about 4 m/s^2",
+        ),
+        (
+            "[laser]\nrate_hz = 1e-9\n",
+            "laser.rate_hz",
+            2,
+            "must be within [1, 100] Hz, is 1e-9 (the LMS111 scans at 25 or 50 Hz",
+        ),
+        (
+            "[[obstacles]]\nkind = \"circle\"\nx = 19\ny = 8\nradius = 1e-300\n",
+            "obstacles[0].radius",
+            5,
+            "must be within [0.01, 100] m, is 1e-300 (",
+        ),
+        (
+            "[gps]\nantenna_z = 1e300\n",
+            "gps.antenna_z",
+            2,
+            "must be within [0, 5] m above ground, is 1e300 (on the roof",
+        ),
+        (
+            "[gps.float]\nhorizontal_sigma_m = 1e300\n",
+            "gps.float.horizontal_sigma_m",
+            2,
+            "must be within [0, 100] m, is 1e300",
+        ),
+        (
+            "[steering]\ntime_constant_s = 1e-9\n",
+            "steering.time_constant_s",
+            2,
+            "must be within [0.001, 2] s, is 1e-9 (the golf car's is 0.08 s",
+        ),
+        (
+            "[sim]\nphysics_hz = 1e-9\n",
+            "sim.physics_hz",
+            2,
+            "must be within [10, 2000] Hz, is 1e-9",
+        ),
+    ] {
+        let e = invalid(text);
+        assert_eq!((e.field.as_str(), e.line), (field, line), "{e}");
+        assert!(e.message.starts_with(says), "{e}");
+    }
+    let e = invalid("[[obstacles]]\nkind = \"circle\"\nx = 19\ny = 8\nradius = 1e-300\n");
+    assert!(
+        e.message.ends_with(
+            "(the suite's posts, trees and carts are 0.2-3 m; 1 cm is a wire, 100 m a building)"
+        ),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_goal_reached_at_the_start_is_refused_naming_the_tolerance() {
+    let scenario = |tolerance: f64| {
+        format!("[start]\nx = 0\ny = 0\n\n[goal]\nx = 3\ny = 4\ntolerance = {tolerance:?}\n")
+    };
+    for tolerance in [6.0, 5.0] {
+        let e = invalid(&scenario(tolerance));
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "bad.toml:8: goal.tolerance: {tolerance} m reaches the start: the goal is 5.000 m from it, so it would be reached at t = 0 with a path of 0 m; it must be below the start-to-goal distance"
+            )
+        );
+    }
+    assert!(Scenario::from_toml(&scenario(4.9), "ok.toml").is_ok());
+}
+
 #[test]
 fn an_obstacle_beyond_f32_is_refused_not_collided_with() {
     let e = invalid("[[obstacles]]\nkind = \"circle\"\nx = 1e39\ny = 0\nradius = 1\n");
@@ -169,13 +255,17 @@ fn the_epoch_is_parsed_at_load_with_its_line() {
 
 #[test]
 fn the_shipped_scenarios_still_load() {
-    for dir in ["scenarios", "scenarios/suite"] {
+    // Every one within the plausible ranges, and its controller configuration too
+    // (what `ugv-sim check` checks).
+    for dir in ["scenarios", "scenarios/suite", "scenarios/faults"] {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
         let mut n = 0;
         for f in std::fs::read_dir(&dir).expect("scenario folder") {
             let p = f.expect("entry").path();
             if p.extension().is_some_and(|e| e == "toml") {
-                Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                let s = Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                checked_controller_config(&s, FollowerKind::Optimal, None)
+                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
                 n += 1;
             }
         }

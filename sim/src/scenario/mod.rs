@@ -8,9 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{
-    FieldError, FieldPath, angle_deg, coordinate, positive, positive_up_to, size, within,
-};
+use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, within};
 
 use crate::devices::gps::{GpsConfig, GpsDevice, GpsError};
 use crate::devices::laser::{LaserConfig, LaserDevice, LaserDeviceError};
@@ -18,9 +16,10 @@ use crate::devices::map::DeviceMap;
 use crate::ecu::EcuSections;
 use crate::faults::plan::PlanFile;
 use crate::faults::{Expectations, FaultSpec};
-use fields::{MAX_OBSTACLES, check_motion, check_points};
+use fields::check_obstacles;
 
 pub mod fields;
+pub mod ranges;
 pub mod schema;
 
 pub use fields::ScenarioError;
@@ -180,14 +179,44 @@ impl Scenario {
         }
     }
 
-    /// The first field that makes no sense, and why: every number finite, of the
-    /// right sign and within plausible bounds (positions within
-    /// [`ugv_fields::PLAUSIBLE_COORDINATE`], so the physics' `f32` never sees an
-    /// infinity), the DBC's signal ranges where a value ends up on the bus, and the
-    /// start and goal usable.
+    /// The first field that makes no sense, and why: every number finite, every
+    /// physical parameter within its plausible range (the tables of [`ranges`], each
+    /// range with its source: the golf car, the DBC's signal ranges, the LMS111's
+    /// datasheet), positions within [`ugv_fields::PLAUSIBLE_COORDINATE`] (so the
+    /// physics' `f32` never sees an infinity), the fields' relations, and the start
+    /// and goal usable (the goal not reached at the start, neither inside an obstacle).
     pub(crate) fn validate(&self) -> Result<(), FieldError> {
         let at = |keys: &[&'static str]| FieldPath::of(keys);
         crate::faults::plan::validate_plan(&self.faults, &self.expect)?;
+        self.check_places()?;
+        ugv_fields::check_bounds(self, ranges::SCENARIO)?;
+        self.check_relations()?;
+        if self.can.interface.is_empty() || self.can.interface.len() > 15 {
+            return Err(FieldError::new(
+                at(&["can", "interface"]),
+                "must be 1 to 15 characters",
+            ));
+        }
+        if self.can.fault_clear_ms > 60_000 {
+            return Err(FieldError::new(
+                at(&["can", "fault_clear_ms"]),
+                format!("must be at most 60000 ms, is {}", self.can.fault_clear_ms),
+            ));
+        }
+        self.gps.validate().map_err(|e| e.under(&at(&["gps"])))?;
+        self.laser
+            .validate()
+            .map_err(|e| e.under(&at(&["laser"])))?;
+        self.devices
+            .validate(&self.can.interface)
+            .map_err(|e| e.under(&at(&["devices"])))?;
+        check_obstacles(&at(&["obstacles"]), &self.obstacles)?;
+        self.check_start_and_goal_free()
+    }
+
+    /// The datum, the start and the goal: places and headings.
+    fn check_places(&self) -> Result<(), FieldError> {
+        let at = |keys: &[&'static str]| FieldPath::of(keys);
         let d = &self.datum;
         within(
             &at(&["datum", "latitude"]),
@@ -218,204 +247,68 @@ impl Scenario {
         if let Some(h) = self.goal.heading_deg {
             angle_deg(&at(&["goal", "heading_deg"]), h)?;
         }
-        positive_up_to(&at(&["goal", "tolerance"]), self.goal.tolerance, 50.0, "m")?;
-        if let Some(v) = self.goal.speed_limit {
-            positive_up_to(
-                &at(&["goal", "speed_limit"]),
-                v,
-                self.vehicle.max_speed,
-                "m/s (vehicle.max_speed)",
-            )?;
+        Ok(())
+    }
+
+    /// Relations between fields whose ranges the table checked: speeds up to the top
+    /// speed, the perception within the laser's range, the route (the controller's own
+    /// rules: every leg has a length, the goal is not reached at the start), the
+    /// wheelbase within the length.
+    fn check_relations(&self) -> Result<(), FieldError> {
+        let at = |keys: &[&'static str]| FieldPath::of(keys);
+        let v = &self.vehicle;
+        if let Some(limit) = self.goal.speed_limit
+            && limit > v.max_speed
+        {
+            return Err(FieldError::new(
+                at(&["goal", "speed_limit"]),
+                format!("{limit} exceeds vehicle.max_speed {}", v.max_speed),
+            ));
         }
-        if let Some(r) = self.controller.detection_radius {
-            positive_up_to(
-                &at(&["controller", "detection_radius"]),
-                r,
-                self.laser.spec().range_max,
-                "m (the laser's range_max)",
-            )?;
+        let range_max = self.laser.spec().range_max;
+        if let Some(r) = self.controller.detection_radius
+            && r > range_max
+        {
+            return Err(FieldError::new(
+                at(&["controller", "detection_radius"]),
+                format!("{r} m exceeds the laser's range_max {range_max} m"),
+            ));
         }
-        // The controller's own rule (its mission.waypoints): every leg has a length.
+        let (start, goal) = ((self.start.x, self.start.y), (self.goal.x, self.goal.y));
         ugv_controller::route::check_waypoints(
             &at(&["waypoints"]),
             &self.waypoints,
-            (self.start.x, self.start.y),
-            (self.goal.x, self.goal.y),
+            start,
+            goal,
             &at(&["goal"]),
-            self.vehicle.max_speed,
+            v.max_speed,
         )?;
-
-        let v = &self.vehicle;
-        let vp = |k: &'static str| at(&["vehicle", k]);
-        for (k, x) in [
-            ("wheelbase", v.wheelbase),
-            ("length", v.length),
-            ("width", v.width),
-            ("radius", v.radius),
-        ] {
-            positive_up_to(&vp(k), x, 20.0, "m")?;
-        }
-        within(&vp("rear_overhang"), v.rear_overhang, 0.0, 20.0, "m")?;
+        ugv_controller::route::check_goal_not_at_start(
+            &at(&["goal", "tolerance"]),
+            self.goal.tolerance,
+            start,
+            goal,
+        )?;
         if v.rear_overhang + v.wheelbase > v.length {
             return Err(FieldError::new(
-                vp("wheelbase"),
+                at(&["vehicle", "wheelbase"]),
                 format!(
                     "rear_overhang {} + wheelbase {} exceed the length {}",
                     v.rear_overhang, v.wheelbase, v.length
                 ),
             ));
         }
-        if !(v.max_steer_deg > 0.0 && v.max_steer_deg < 60.0) {
-            return Err(FieldError::new(
-                vp("max_steer_deg"),
-                format!("must be in (0, 60), is {}", v.max_steer_deg),
-            ));
-        }
-        // The DBC's ranges bound what can be commanded at all.
-        if v.max_steer_deg > 45.0 {
-            return Err(FieldError::new(
-                vp("max_steer_deg"),
-                "exceeds the DBC's TargetAngle range of 45 degrees",
-            ));
-        }
-        positive(&vp("max_speed"), v.max_speed)?;
-        if v.max_speed > 10.0 {
-            return Err(FieldError::new(
-                vp("max_speed"),
-                "exceeds the DBC's TargetSpeed range of 10 m/s",
-            ));
-        }
+        Ok(())
+    }
 
-        let s = &self.steering;
-        let sp = |k: &'static str| at(&["steering", k]);
-        within(&sp("dead_time_s"), s.dead_time_s, 0.0, 5.0, "s")?;
-        positive_up_to(&sp("time_constant_s"), s.time_constant_s, 10.0, "s")?;
-        positive_up_to(&sp("max_rate_deg_s"), s.max_rate_deg_s, 1_000.0, "deg/s")?;
-        // The DBC's MotorCurrent range.
-        within(&sp("idle_current_a"), s.idle_current_a, 0.0, 25.5, "A")?;
-        within(
-            &sp("current_per_rate_a"),
-            s.current_per_rate_a,
-            0.0,
-            10.0,
-            "A per deg/s",
-        )?;
-        within(&sp("bias_deg"), s.bias_deg, -10.0, 10.0, "degrees")?;
-        let t = &self.throttle;
-        let tp = |k: &'static str| at(&["throttle", k]);
-        within(&tp("dead_time_s"), t.dead_time_s, 0.0, 5.0, "s")?;
-        positive_up_to(&tp("time_constant_s"), t.time_constant_s, 10.0, "s")?;
-        positive_up_to(&tp("max_accel"), t.max_accel, 20.0, "m/s^2")?;
-        positive_up_to(&tp("max_decel"), t.max_decel, 20.0, "m/s^2")?;
-        positive_up_to(&tp("brake_decel"), t.brake_decel, 20.0, "m/s^2")?;
-        within(
-            &tp("throttle_per_speed"),
-            t.throttle_per_speed,
-            0.0,
-            100.0,
-            "% per m/s",
-        )?;
-        if self.can.interface.is_empty() || self.can.interface.len() > 15 {
-            return Err(FieldError::new(
-                at(&["can", "interface"]),
-                "must be 1 to 15 characters",
-            ));
-        }
-        if self.can.fault_clear_ms > 60_000 {
-            return Err(FieldError::new(
-                at(&["can", "fault_clear_ms"]),
-                format!("must be at most 60000 ms, is {}", self.can.fault_clear_ms),
-            ));
-        }
-
-        self.gps.validate().map_err(|e| e.under(&at(&["gps"])))?;
-        self.laser
-            .validate()
-            .map_err(|e| e.under(&at(&["laser"])))?;
-        self.devices
-            .validate(&self.can.interface)
-            .map_err(|e| e.under(&at(&["devices"])))?;
-        let sim = &self.sim;
-        within(
-            &at(&["sim", "physics_hz"]),
-            sim.physics_hz,
-            10.0,
-            2000.0,
-            "Hz",
-        )?;
-        positive_up_to(
-            &at(&["sim", "time_limit_s"]),
-            sim.time_limit_s,
-            86_400.0,
-            "s",
-        )?;
-        within(
-            &at(&["success", "min_clearance"]),
-            self.success.min_clearance,
-            0.0,
-            100.0,
-            "m",
-        )?;
-
-        if self.obstacles.len() > MAX_OBSTACLES {
-            return Err(FieldError::new(
-                at(&["obstacles"]),
-                format!(
-                    "has {} obstacles, at most {MAX_OBSTACLES} are allowed",
-                    self.obstacles.len()
-                ),
-            ));
-        }
-        for (i, o) in self.obstacles.iter().enumerate() {
-            let p = at(&["obstacles"]).index(i);
-            match o {
-                Obstacle::Circle {
-                    x,
-                    y,
-                    radius,
-                    motion,
-                } => {
-                    coordinate(&p.key("x"), *x)?;
-                    coordinate(&p.key("y"), *y)?;
-                    size(&p.key("radius"), *radius)?;
-                    check_motion(&p.key("motion"), motion)?;
-                }
-                Obstacle::Box {
-                    x,
-                    y,
-                    length,
-                    width,
-                    heading_deg,
-                    motion,
-                } => {
-                    coordinate(&p.key("x"), *x)?;
-                    coordinate(&p.key("y"), *y)?;
-                    size(&p.key("length"), *length)?;
-                    size(&p.key("width"), *width)?;
-                    angle_deg(&p.key("heading_deg"), *heading_deg)?;
-                    check_motion(&p.key("motion"), motion)?;
-                }
-                Obstacle::Wall { points, thickness } => {
-                    check_points(&p.key("points"), points, 2)?;
-                    size(&p.key("thickness"), *thickness)?;
-                    for (j, w) in points.windows(2).enumerate() {
-                        if w[0] == w[1] {
-                            return Err(FieldError::new(
-                                p.key("points").index(j + 1),
-                                "repeats the previous point",
-                            ));
-                        }
-                    }
-                }
-            }
-        }
-        // Consistency: the start and the goal must be free (the footprint at the start,
-        // the planner's circle at the goal), or nothing would ever pass.
+    /// The start and the goal must be free (the footprint at the start, the planner's
+    /// circle at the goal), or nothing would ever pass.
+    fn check_start_and_goal_free(&self) -> Result<(), FieldError> {
         let world = crate::world::World::new(&self.obstacles);
         let start = crate::vehicle::VehicleState::at(&self.start);
         if let Some(i) = world.footprint_hits(&self.vehicle, &start).first() {
             return Err(FieldError::new(
-                at(&["start"]),
+                FieldPath::of(&["start"]),
                 format!("the vehicle's footprint at the start overlaps obstacles[{i}]"),
             ));
         }
@@ -425,7 +318,7 @@ impl Scenario {
                 .first()
         {
             return Err(FieldError::new(
-                at(&["goal"]),
+                FieldPath::of(&["goal"]),
                 format!(
                     "the goal lies inside obstacles[{i}] at t = 0 but success.reach_goal is true"
                 ),

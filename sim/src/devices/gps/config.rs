@@ -7,8 +7,12 @@ use serde::{Deserialize, Serialize};
 
 use super::super::{FieldError, invalid};
 
-/// Slowest and fastest epoch rates, Hz (what RTK receivers offer).
-pub const RATE_RANGE_HZ: (f64, f64) = (1.0, 20.0);
+/// Slowest and fastest epoch rates, Hz (what RTK receivers offer): the controller's
+/// `safety.gps_rate_hz` range.
+pub const RATE_RANGE_HZ: (f64, f64) = (
+    ugv_controller::ranges::GPS_RATE.lo,
+    ugv_controller::ranges::GPS_RATE.hi,
+);
 /// Serial rates accepted, baud (8N1).
 pub const BAUD_RANGE: (u32, u32) = (1200, 4_000_000);
 
@@ -122,7 +126,7 @@ pub struct FixModel {
 }
 
 macro_rules! fix_model_table {
-    ($(#[$doc:meta])* $name:ident, $prefix:literal, $default:expr) => {
+    ($(#[$doc:meta])* $name:ident, $default:expr) => {
         $(#[$doc])*
         #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
         #[serde(default, deny_unknown_fields)]
@@ -171,62 +175,6 @@ macro_rules! fix_model_table {
                     hdop: self.hdop,
                 }
             }
-
-            fn validate(&self) -> Result<(), FieldError> {
-                let non_negative = |field: &'static str, v: f64| {
-                    if v.is_finite() && v >= 0.0 {
-                        Ok(())
-                    } else {
-                        Err(invalid(field, format!("must be a finite number >= 0, is {v}")))
-                    }
-                };
-                non_negative(concat!($prefix, ".horizontal_sigma_m"), self.horizontal_sigma_m)?;
-                non_negative(concat!($prefix, ".vertical_sigma_m"), self.vertical_sigma_m)?;
-                non_negative(concat!($prefix, ".velocity_sigma_mps"), self.velocity_sigma_mps)?;
-                // GST carries sigmas with three decimals up to 9999.999 m.
-                for (field, v) in [
-                    (concat!($prefix, ".horizontal_sigma_m"), self.horizontal_sigma_m),
-                    (concat!($prefix, ".vertical_sigma_m"), self.vertical_sigma_m),
-                ] {
-                    if v > 1000.0 {
-                        return Err(invalid(field, format!("{v} m exceeds 1000 m")));
-                    }
-                }
-                if self.velocity_sigma_mps > 100.0 {
-                    return Err(invalid(
-                        concat!($prefix, ".velocity_sigma_mps"),
-                        format!("{} m/s exceeds 100 m/s", self.velocity_sigma_mps),
-                    ));
-                }
-                if !(self.time_constant_s.is_finite()
-                    && self.time_constant_s > 0.0
-                    && self.time_constant_s <= 86_400.0)
-                {
-                    return Err(invalid(
-                        concat!($prefix, ".time_constant_s"),
-                        format!("must be within (0, 86400] s, is {}", self.time_constant_s),
-                    ));
-                }
-                if !(0.0..=1.0).contains(&self.white_fraction) {
-                    return Err(invalid(
-                        concat!($prefix, ".white_fraction"),
-                        format!("must be within [0, 1], is {}", self.white_fraction),
-                    ));
-                }
-                if self.satellites > 99 {
-                    return Err(invalid(
-                        concat!($prefix, ".satellites"),
-                        format!("must be within [0, 99], is {}", self.satellites),
-                    ));
-                }
-                if !(self.hdop.is_finite() && self.hdop > 0.0 && self.hdop <= 99.99) {
-                    return Err(invalid(
-                        concat!($prefix, ".hdop"),
-                        format!("must be within (0, 99.99], is {}", self.hdop),
-                    ));
-                }
-                Ok(())
-            }
         }
     };
 }
@@ -235,7 +183,6 @@ fix_model_table!(
     /// `[gps.rtk]`: RTK fixed, 1.5 cm horizontal and 3 cm vertical (1-sigma), wandering
     /// over 30 s, 20 satellites, HDOP 0.6.
     RtkModel,
-    "rtk",
     FixModel {
         horizontal_sigma_m: 0.015,
         vertical_sigma_m: 0.03,
@@ -251,7 +198,6 @@ fix_model_table!(
     /// `[gps.float]`: RTK float, 0.25 m horizontal and 0.5 m vertical, over 60 s,
     /// 16 satellites, HDOP 0.8.
     FloatModel,
-    "float",
     FixModel {
         horizontal_sigma_m: 0.25,
         vertical_sigma_m: 0.5,
@@ -267,7 +213,6 @@ fix_model_table!(
     /// `[gps.single]`: autonomous, 1.5 m horizontal and 3 m vertical, over 120 s,
     /// 12 satellites, HDOP 1.1.
     SingleModel,
-    "single",
     FixModel {
         horizontal_sigma_m: 1.5,
         vertical_sigma_m: 3.0,
@@ -342,27 +287,20 @@ impl Default for GpsConfig {
 }
 
 impl GpsConfig {
-    /// Every field checked; a rate the baud cannot carry is refused with the numbers.
+    /// Every field checked: the physical ones within their ranges (the tables
+    /// [`crate::scenario::ranges::GPS`] and [`crate::scenario::ranges::FIX_MODEL`],
+    /// each range with its source), the events in time order, and a rate the baud
+    /// cannot carry refused with the numbers.
     pub fn validate(&self) -> Result<(), FieldError> {
-        for (field, v) in [
-            ("antenna_x", self.antenna_x),
-            ("antenna_y", self.antenna_y),
-            ("antenna_z", self.antenna_z),
+        use crate::scenario::ranges::{FIX_MODEL, GPS};
+        ugv_fields::check_bounds(self, GPS)?;
+        for (key, model) in [
+            ("rtk", self.rtk.model()),
+            ("float", self.float.model()),
+            ("single", self.single.model()),
         ] {
-            // The antenna sits on the car: within 20 m of its rear axle.
-            if !(v.is_finite() && v.abs() <= 20.0) {
-                return Err(invalid(
-                    field,
-                    format!("must be within [-20, 20] m of the rear axle, is {v}"),
-                ));
-            }
-        }
-        let (lo, hi) = RATE_RANGE_HZ;
-        if !(self.rate_hz.is_finite() && (lo..=hi).contains(&self.rate_hz)) {
-            return Err(invalid(
-                "rate_hz",
-                format!("must be within [{lo}, {hi}] Hz, is {}", self.rate_hz),
-            ));
+            ugv_fields::check_bounds(&model, FIX_MODEL)
+                .map_err(|e| e.under(&ugv_fields::FieldPath::of(&[key])))?;
         }
         let (lo, hi) = BAUD_RANGE;
         if !(lo..=hi).contains(&self.baud) {
@@ -376,15 +314,6 @@ impl GpsConfig {
             return Err(invalid(
                 "sentences",
                 "neither GGA nor RMC is enabled: no sentence would carry the position",
-            ));
-        }
-        if !(self.heading_sigma_deg.is_finite() && (0.0..=30.0).contains(&self.heading_sigma_deg)) {
-            return Err(invalid(
-                "heading_sigma_deg",
-                format!(
-                    "must be within [0, 30] degrees, is {}",
-                    self.heading_sigma_deg
-                ),
             ));
         }
         let mut last = f64::NEG_INFINITY;
@@ -407,28 +336,10 @@ impl GpsConfig {
             }
             last = e.at_s;
         }
-        self.rtk.validate()?;
-        self.float.validate()?;
-        self.single.validate()?;
-        if !(self.correction_age_s.is_finite() && (0.0..=999.9).contains(&self.correction_age_s)) {
-            return Err(invalid(
-                "correction_age_s",
-                format!("must be within [0, 999.9] s, is {}", self.correction_age_s),
-            ));
-        }
         if self.station_id > 1023 {
             return Err(invalid(
                 "station_id",
                 format!("must be within [0, 1023], is {}", self.station_id),
-            ));
-        }
-        if !(self.geoid_separation_m.is_finite() && self.geoid_separation_m.abs() <= 200.0) {
-            return Err(invalid(
-                "geoid_separation_m",
-                format!(
-                    "must be within [-200, 200] m, is {}",
-                    self.geoid_separation_m
-                ),
             ));
         }
         link_budget(&self.writer_config()).map_err(|e| match e {

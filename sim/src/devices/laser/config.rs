@@ -136,14 +136,6 @@ impl Default for LaserConfig {
     }
 }
 
-fn finite(field: &'static str, v: f64) -> Result<(), FieldError> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(invalid(field, format!("{v} is not a finite number")))
-    }
-}
-
 impl LaserConfig {
     /// The profile's figures with this configuration's overrides.
     pub fn spec(&self) -> LaserSpec {
@@ -158,50 +150,39 @@ impl LaserConfig {
         }
     }
 
+    /// Every field checked: the mounting and the scanner's figures (the profile's, or
+    /// the overrides) within their ranges (the table [`crate::scenario::ranges::LASER`],
+    /// each range with its source), the range limits ordered, the beams within a frame.
     pub fn validate(&self) -> Result<(), FieldError> {
-        for (field, v) in [
-            ("mount_x", self.mount_x),
-            ("mount_y", self.mount_y),
-            ("mount_yaw_deg", self.mount_yaw_deg),
-        ] {
-            finite(field, v)?;
-        }
-        // The scanner sits on the car; a yaw is at most a turn either way.
-        for (field, v, limit, unit) in [
-            ("mount_x", self.mount_x, 20.0, "m of the rear axle"),
-            ("mount_y", self.mount_y, 20.0, "m of the rear axle"),
-            ("mount_yaw_deg", self.mount_yaw_deg, 360.0, "degrees"),
-        ] {
-            if v.abs() > limit {
-                return Err(invalid(
-                    field,
-                    format!("must be within [-{limit}, {limit}] {unit}, is {v}"),
-                ));
-            }
-        }
         let s = self.spec();
-        let profile = format!("{:?}", self.profile).to_lowercase();
-        let from = |field: &'static str, set: bool| {
-            if set {
-                field.to_owned()
+        // Before the ranges: an override beyond the profile's other limit is named
+        // with the profile it collides with.
+        if s.range_min >= s.range_max {
+            let profile = format!("{:?}", self.profile).to_lowercase();
+            let from = |field: &'static str, set: bool| {
+                if set {
+                    field.to_owned()
+                } else {
+                    format!("{field} of the {profile} profile")
+                }
+            };
+            let field = if self.range_min.is_some() {
+                "range_min"
             } else {
-                format!("{field} of the {profile} profile")
-            }
-        };
-        finite("fov_deg", s.fov_deg)?;
-        if !(s.fov_deg > 0.0 && s.fov_deg <= 360.0) {
+                "range_max"
+            };
             return Err(invalid(
-                "fov_deg",
-                format!("must be in (0, 360] degrees, is {}", s.fov_deg),
+                field,
+                format!(
+                    "range_min {} ({}) must be below range_max {} ({})",
+                    s.range_min,
+                    from("range_min", self.range_min.is_some()),
+                    s.range_max,
+                    from("range_max", self.range_max.is_some()),
+                ),
             ));
         }
-        finite("resolution_deg", s.resolution_deg)?;
-        if s.resolution_deg <= 0.0 {
-            return Err(invalid(
-                "resolution_deg",
-                format!("must be positive, is {}", s.resolution_deg),
-            ));
-        }
+        ugv_fields::check_bounds(self, crate::scenario::ranges::LASER)?;
         if s.resolution_deg > s.fov_deg {
             return Err(invalid(
                 "resolution_deg",
@@ -221,70 +202,6 @@ impl LaserConfig {
                     s.beams()
                 ),
             ));
-        }
-        finite("rate_hz", s.rate_hz)?;
-        if !(s.rate_hz > 0.0 && s.rate_hz <= 1000.0) {
-            return Err(invalid(
-                "rate_hz",
-                format!("must be in (0, 1000] Hz, is {}", s.rate_hz),
-            ));
-        }
-        finite("range_min", s.range_min)?;
-        finite("range_max", s.range_max)?;
-        if s.range_min < 0.0 {
-            return Err(invalid(
-                "range_min",
-                format!("must not be negative, is {}", s.range_min),
-            ));
-        }
-        if s.range_min >= s.range_max {
-            let field = if self.range_min.is_some() {
-                "range_min"
-            } else {
-                "range_max"
-            };
-            return Err(invalid(
-                field,
-                format!(
-                    "range_min {} ({}) must be below range_max {} ({})",
-                    s.range_min,
-                    from("range_min", self.range_min.is_some()),
-                    s.range_max,
-                    from("range_max", self.range_max.is_some()),
-                ),
-            ));
-        }
-        if s.range_max > 1000.0 {
-            return Err(invalid(
-                "range_max",
-                format!("must be at most 1000 m, is {}", s.range_max),
-            ));
-        }
-        finite("range_noise_sigma", s.range_noise_sigma)?;
-        if s.range_noise_sigma < 0.0 {
-            return Err(invalid(
-                "range_noise_sigma",
-                format!("must not be negative, is {}", s.range_noise_sigma),
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.dropout_probability) {
-            return Err(invalid(
-                "dropout_probability",
-                format!("must be within [0, 1], is {}", self.dropout_probability),
-            ));
-        }
-        for (field, v) in [
-            ("intensity_circle", self.intensity_circle),
-            ("intensity_box", self.intensity_box),
-            ("intensity_wall", self.intensity_wall),
-        ] {
-            finite(field, v)?;
-            if v < 0.0 || v > f64::from(f32::MAX) {
-                return Err(invalid(
-                    field,
-                    format!("must be within [0, f32::MAX], is {v}"),
-                ));
-            }
         }
         Ok(())
     }
