@@ -807,19 +807,7 @@ fn write_summaries(
 }
 
 fn merge_shards(shards: &[PathBuf], out: &std::path::Path) -> Result<ExitCode> {
-    let mut files = Vec::with_capacity(shards.len());
-    for s in shards {
-        let path = if s.is_dir() {
-            s.join("items.json")
-        } else {
-            s.clone()
-        };
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {} (a shard's items.json)", path.display()))?;
-        let file: ugv_sim::suite::ShardFile = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a shard's items.json", path.display()))?;
-        files.push((path.display().to_string(), file));
-    }
+    let files = ugv_sim::suite::read_shards(shards, out)?;
     let (summary, merged) = ugv_sim::suite::merge(&files)?;
     write_summaries(out, &summary, &merged)?;
     eprintln!(
