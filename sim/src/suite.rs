@@ -4,7 +4,7 @@
 //! runs each scenario with several seeds and grid points; a shard runs part of one
 //! and records its items (`items.json`), which [`merge`] joins into one summary.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -19,6 +19,9 @@ use crate::scenario::Scenario;
 use crate::sil::{Hook, run_sil_recorded};
 use crate::sweep::{Percentiles, Plan, PlanInfo, Shard, wilson95};
 use crate::verdict::Verdict;
+
+mod merge;
+pub use merge::{MergeError, merge, read_shards};
 
 /// One item's result.
 #[derive(Clone, Debug)]
@@ -212,6 +215,7 @@ pub struct Metrics {
 /// One item's result as summaries and shard files hold it: no wall-clock time, so
 /// the summaries of a sweep are the same however it was split and run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ItemRecord {
     pub index: usize,
     pub id: String,
@@ -494,6 +498,7 @@ pub fn junit(entries: &[SuiteEntry]) -> String {
 /// A shard's record of its items (`items.json`): the plan it ran part of, which part,
 /// and each item's result with its wall-clock time.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ShardFile {
     pub plan: PlanInfo,
     pub shard: Shard,
@@ -501,6 +506,7 @@ pub struct ShardFile {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ShardItem {
     pub wall_s: f64,
     pub record: ItemRecord,
@@ -520,131 +526,6 @@ impl ShardFile {
                 .collect(),
         }
     }
-}
-
-/// Why shard files do not merge.
-#[derive(Debug, thiserror::Error)]
-pub enum MergeError {
-    #[error("no shard files to merge")]
-    Empty,
-    #[error("{later} is a shard of another sweep than {first}: {what} differ")]
-    OtherPlan {
-        first: String,
-        later: String,
-        what: &'static str,
-    },
-    #[error("{source_name}: item {index} is {id:?}, but the plan's item {index} is {planned:?}")]
-    Mismatch {
-        source_name: String,
-        index: usize,
-        id: String,
-        planned: String,
-    },
-    #[error(
-        "item {id:?} is in both {first} and {second} (a shard given twice, or shards of different splits?)"
-    )]
-    Doubled {
-        id: String,
-        first: String,
-        second: String,
-    },
-    #[error(
-        "{missing} of {total} items are in no shard file, among them {examples} (shards given: {shards})"
-    )]
-    Missing {
-        missing: usize,
-        total: usize,
-        examples: String,
-        shards: String,
-    },
-}
-
-/// Join shard files (each named by where it came from) into the plan's summary and
-/// the merged shard file; every item of the plan must be in exactly one of them.
-pub fn merge(shards: &[(String, ShardFile)]) -> Result<(Summary, ShardFile), MergeError> {
-    let (first_name, first) = shards.first().ok_or(MergeError::Empty)?;
-    let plan = &first.plan;
-    let mut by_index: BTreeMap<usize, (&str, &ShardItem)> = BTreeMap::new();
-    for (name, shard) in shards {
-        let p = &shard.plan;
-        let what = if p.files != plan.files {
-            Some("the scenario files")
-        } else if p.seeds != plan.seeds {
-            Some("the seeds")
-        } else if p.vary != plan.vary {
-            Some("the --vary settings")
-        } else if p.settings != plan.settings {
-            Some("the run settings (mode, follower, model)")
-        } else if p.items != plan.items {
-            Some("the items")
-        } else {
-            None
-        };
-        if let Some(what) = what {
-            return Err(MergeError::OtherPlan {
-                first: first_name.clone(),
-                later: name.clone(),
-                what,
-            });
-        }
-        for item in &shard.items {
-            let r = &item.record;
-            let planned = plan
-                .items
-                .get(r.index)
-                .map(String::as_str)
-                .unwrap_or("(none)");
-            if planned != r.id {
-                return Err(MergeError::Mismatch {
-                    source_name: name.clone(),
-                    index: r.index,
-                    id: r.id.clone(),
-                    planned: planned.to_owned(),
-                });
-            }
-            if let Some((other, _)) = by_index.insert(r.index, (name, item)) {
-                return Err(MergeError::Doubled {
-                    id: r.id.clone(),
-                    first: other.to_owned(),
-                    second: name.clone(),
-                });
-            }
-        }
-    }
-    let missing: Vec<&String> = plan
-        .items
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !by_index.contains_key(i))
-        .map(|(_, id)| id)
-        .collect();
-    if !missing.is_empty() {
-        let mut examples: Vec<String> =
-            missing.iter().take(5).map(|id| format!("{id:?}")).collect();
-        if missing.len() > 5 {
-            examples.push("...".to_owned());
-        }
-        return Err(MergeError::Missing {
-            missing: missing.len(),
-            total: plan.items.len(),
-            examples: examples.join(", "),
-            shards: shards
-                .iter()
-                .map(|(n, s)| format!("{} ({n})", s.shard))
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
-    }
-    let items: Vec<ShardItem> = by_index.into_values().map(|(_, i)| i.clone()).collect();
-    let summary = Summary::of(items.iter().map(|i| i.record.clone()).collect());
-    Ok((
-        summary,
-        ShardFile {
-            plan: plan.clone(),
-            shard: Shard::ALL,
-            items,
-        },
-    ))
 }
 
 #[cfg(test)]

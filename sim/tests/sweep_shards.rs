@@ -239,3 +239,156 @@ fn bad_sweep_arguments_are_refused_by_name() -> Result<()> {
     }
     Ok(())
 }
+
+/// `ugv-sim merge` of `inputs` into `out`: its exit code and stderr, killed (and an
+/// error) if it takes over a minute (a FIFO given as items.json used to hang it).
+fn merge_into(inputs: &[&Path], out: &Path) -> Result<(Option<i32>, String)> {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_ugv-sim"));
+    cmd.arg("merge")
+        .args(inputs)
+        .arg("--out")
+        .arg(out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped());
+    let mut child = cmd.spawn()?;
+    let started = std::time::Instant::now();
+    while child.try_wait()?.is_none() {
+        if started.elapsed() > std::time::Duration::from_secs(60) {
+            child.kill()?;
+            child.wait()?;
+            anyhow::bail!("merge of {inputs:?} still running after a minute");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let out = child.wait_with_output()?;
+    Ok((out.status.code(), stderr(&out)))
+}
+
+/// A copy of the shard folder `from` as `to`, its items.json changed by `edit`.
+fn edited(from: &Path, to: &Path, edit: impl Fn(&mut serde_json::Value)) -> Result<PathBuf> {
+    std::fs::create_dir_all(to)?;
+    let mut json = items(from)?;
+    edit(&mut json);
+    std::fs::write(to.join("items.json"), serde_json::to_string_pretty(&json)?)?;
+    Ok(to.to_path_buf())
+}
+
+#[test]
+fn merge_refuses_bad_shard_headers_forged_fields_fifos_and_its_own_inputs() -> Result<()> {
+    let tmp = tempfile::tempdir()?;
+    let suite = small_suite(tmp.path())?;
+    let run = |name: &str, shard: &str| -> Result<PathBuf> {
+        let dir = tmp.path().join(name);
+        suite_run(&suite, &dir, &["--shard", shard], &[])?;
+        Ok(dir)
+    };
+    let s: Vec<PathBuf> = (0..3)
+        .map(|i| run(&format!("s{i}"), &format!("{i}/3")))
+        .collect::<Result<_>>()?;
+    let out = tmp.path().join("merged");
+    let (code, err) = merge_into(&[&s[0], &s[1], &s[2]], &out)?;
+    ensure!(matches!(code, Some(0 | 1)), "the good merge: {err}");
+    let refused = |inputs: &[&Path], says: &str| -> Result<()> {
+        let (code, err) = merge_into(inputs, &out)?;
+        ensure!(code == Some(4), "{inputs:?}: exit {code:?}: {err}");
+        ensure!(err.contains(says), "{inputs:?}\n got: {err}\nwant: {says}");
+        Ok(())
+    };
+    let edit = |name: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        edited(&s[2], &tmp.path().join(name), edit)
+    };
+    // A shard header no --shard would be, and unknown fields.
+    let past = edit("past", &|j| j["shard"]["index"] = 5.into())?;
+    refused(
+        &[&s[0], &s[1], &past],
+        "not a shard's items.json: shard 5/3: the shard index is 0-based (like JOB_COMPLETION_INDEX): 0 to 2, is 5",
+    )?;
+    let zero = edit("zero", &|j| {
+        j["shard"] = serde_json::json!({"index": 0, "count": 0})
+    })?;
+    refused(
+        &[&zero],
+        "shard 0/0: the shard count must be 1 to 100000, is 0",
+    )?;
+    let extra = edit("extra", &|j| j["plan"]["note"] = "x".into())?;
+    refused(&[&s[0], &s[1], &extra], "unknown field `note`")?;
+    // Forged fields: the plan edited, an item's verdict flipped.
+    let seeds = edit("seeds", &|j| j["plan"]["seeds"] = 3.into())?;
+    refused(
+        &[&s[0], &s[1], &seeds],
+        "items.json: its plan does not match its fingerprint",
+    )?;
+    let flipped = edit("flipped", &|j| {
+        let r = &mut j["items"][0]["record"];
+        r["passed"] = (!r["passed"].as_bool().unwrap_or(false)).into();
+    })?;
+    refused(&[&s[0], &s[1], &flipped], "but the outcome is")?;
+    // Shards of one split only, each once; and all of them.
+    let two = run("two", "1/2")?;
+    refused(
+        &[&s[0], &s[1], &two],
+        "is shard 1/2 and", // of a split of 3
+    )?;
+    let whole = run("whole", "0/1")?;
+    let half = edited(&whole, &tmp.path().join("half"), |j| {
+        j["shard"] = serde_json::json!({"index": 0, "count": 2});
+    })?;
+    refused(&[&half], "shards 1 of 2 are missing")?;
+    // A shard of the same files, names and items, one of whose contents changed.
+    let a = suite.join("a.toml");
+    let text = std::fs::read_to_string(&a)?;
+    std::fs::write(&a, text.replace("physics_hz = 50.0", "physics_hz = 40.0"))?;
+    let changed = run("changed", "2/3")?;
+    refused(
+        &[&s[0], &s[1], &changed],
+        "is a shard of another sweep than",
+    )?;
+    refused(
+        &[&s[0], &s[1], &changed],
+        "the scenarios (a file's contents) differ",
+    )?;
+    // A FIFO as items.json: refused at once, not waited on.
+    let fifo = tmp.path().join("fifo");
+    std::fs::create_dir_all(&fifo)?;
+    let made = Command::new("mkfifo")
+        .arg(fifo.join("items.json"))
+        .status()?;
+    ensure!(made.success(), "mkfifo");
+    refused(&[&s[0], &fifo], "items.json is a FIFO, not a regular file")?;
+    // --out one of the inputs' folders.
+    let (code, err) = merge_into(&[&s[0], &s[1], &s[2]], &s[1])?;
+    ensure!(code == Some(4), "exit {code:?}: {err}");
+    ensure!(err.contains("is the folder of the shard"), "{err}");
+    let (code, err) = merge_into(&[&s[0], &s[1], &s[2].join("items.json")], &s[2])?;
+    ensure!(
+        code == Some(4) && err.contains("the merge would overwrite it"),
+        "{err}"
+    );
+    Ok(())
+}
+
+#[test]
+fn a_value_given_twice_is_refused() -> Result<()> {
+    let tmp = tempfile::tempdir()?;
+    let suite = small_suite(tmp.path())?;
+    let results = tmp.path().join("r");
+    let out = ugv_sim(
+        &[
+            "suite",
+            suite.to_str().context("path")?,
+            "--results",
+            results.to_str().context("path")?,
+            "--vary",
+            "steering.dead_time_s=0.1,0.1",
+            "--list",
+        ],
+        &[],
+    )?;
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("steering.dead_time_s: the value 0.1 is given twice"),
+        "{err}"
+    );
+    Ok(())
+}

@@ -16,6 +16,10 @@ pub use shard::{Shard, assign};
 pub use stats::{Percentiles, wilson95};
 pub use vary::{MAX_VALUES, Setting, Vary, scenario_with};
 
+use ugv_controller::config::FollowerKind;
+use ugv_fields::FieldError;
+
+use crate::mission::checked_controller_config;
 use crate::scenario::{Scenario, ScenarioError};
 
 /// Most seeds per scenario and grid point.
@@ -39,6 +43,47 @@ pub enum SweepError {
         setting: String,
         error: ScenarioError,
     },
+    /// A grid point whose scenario the controller's configuration refuses (what
+    /// `ugv-sim check` refuses): every run of it would error.
+    #[error("--vary {setting}: {file}: the controller's configuration for it: {error}")]
+    Controller {
+        setting: String,
+        /// The file with the settings.
+        file: String,
+        error: FieldError,
+    },
+    /// The same field swept twice: its grid points would repeat.
+    #[error("--vary {0} is given twice: sweep each field once, with all its values")]
+    RepeatedKey(String),
+}
+
+/// What `ugv-sim check` checks of a scenario beyond its own fields: the controller's
+/// configuration derived from it (the default follower, as `check` derives it).
+pub fn check_controller(scenario: &Scenario) -> Result<(), FieldError> {
+    checked_controller_config(scenario, FollowerKind::Optimal, None).map(|_| ())
+}
+
+/// The scenario of a grid point: the file's `text` with the `point`'s settings,
+/// checked as `ugv-sim check` checks a file (its fields, then the controller's
+/// configuration); the error names the grid point and the field.
+fn grid_scenario(text: &str, file: &str, point: &[Setting]) -> Result<Scenario, SweepError> {
+    let join = |sep: &str| {
+        point
+            .iter()
+            .map(Setting::to_string)
+            .collect::<Vec<_>>()
+            .join(sep)
+    };
+    let scenario = scenario_with(text, file, point).map_err(|error| SweepError::Override {
+        setting: join(" "),
+        error,
+    })?;
+    check_controller(&scenario).map_err(|error| SweepError::Controller {
+        setting: join(" "),
+        file: format!("{file} with {}", join(", ")),
+        error,
+    })?;
+    Ok(scenario)
 }
 
 /// A scenario file with one grid point's settings applied.
@@ -77,6 +122,7 @@ pub struct Plan {
 
 /// What identifies a plan in shard files, so that only shards of one sweep merge.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlanInfo {
     pub files: Vec<String>,
     pub seeds: usize,
@@ -85,6 +131,53 @@ pub struct PlanInfo {
     pub settings: Vec<String>,
     /// Every item's id, in plan order.
     pub items: Vec<String>,
+    /// A digest of each group's scenario as its items run it (files x grid points, in
+    /// plan order): a scenario file edited between two shards' runs makes another plan.
+    pub scenarios: Vec<String>,
+    /// The digest of all the fields above ([`PlanInfo::digest`]): the same in every
+    /// shard of one sweep, and what a merge checks each shard's fields against, so a
+    /// shard file whose plan was edited by hand is refused. FNV-1a, not a cryptographic
+    /// hash: it tells sweeps apart and catches edits, not a forger who recomputes it.
+    pub fingerprint: String,
+}
+
+impl PlanInfo {
+    /// The digest of the plan's fields (all but the fingerprint).
+    pub fn digest(&self) -> String {
+        let fields = (
+            &self.files,
+            self.seeds,
+            &self.vary,
+            &self.settings,
+            &self.items,
+            &self.scenarios,
+        );
+        digest(
+            serde_json::to_string(&fields)
+                .unwrap_or_default()
+                .as_bytes(),
+        )
+    }
+}
+
+/// FNV-1a (64 bits) of `bytes`, in hex: stable across builds and platforms.
+fn digest(bytes: &[u8]) -> String {
+    let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    format!("{hash:016x}")
+}
+
+/// An item's id: `STEM[@KEY=VALUE...][#SEED_INDEX]` (the seed index when the plan has
+/// several seeds).
+pub fn item_id(stem: &str, point: &[String], seeds: usize, seed_index: usize) -> String {
+    let point: String = point.iter().map(|s| format!("@{s}")).collect();
+    let suffix = if seeds > 1 {
+        format!("#{seed_index}")
+    } else {
+        String::new()
+    };
+    format!("{stem}{point}{suffix}")
 }
 
 /// `n` seeds of a scenario whose own seed is `base`: `base` first (so one seed runs
@@ -136,6 +229,11 @@ impl Plan {
         if total > MAX_ITEMS as u128 {
             return Err(SweepError::TooMany(total));
         }
+        for (i, v) in vary.iter().enumerate() {
+            if vary[..i].iter().any(|w| w.key == v.key) {
+                return Err(SweepError::RepeatedKey(v.key.to_string()));
+            }
+        }
         if vary.is_empty() {
             let mut plan = Plan::of_files(files);
             plan = Plan::with_groups(plan.groups, seeds, Vec::new());
@@ -162,23 +260,15 @@ impl Plan {
         for f in files {
             let name = f.display().to_string();
             let text = ugv_fields::read_file(f);
-            // The file as written must load; then every setting must be accepted.
-            let base = text
-                .as_ref()
-                .map_err(ToString::to_string)
-                .and_then(|t| Scenario::from_toml(t, &name).map_err(|e| e.to_string()));
+            // The file as written must pass `ugv-sim check`; then every grid point must.
+            let base = text.as_ref().map_err(ToString::to_string).and_then(|t| {
+                let sc = Scenario::from_toml(t, &name).map_err(|e| e.to_string())?;
+                check_controller(&sc)
+                    .map_err(|e| format!("{name}: the controller's configuration for it: {e}"))
+            });
             for point in &grid {
                 let scenario = match (&base, &text) {
-                    (Ok(_), Ok(t)) => Ok(scenario_with(t, &name, point).map_err(|error| {
-                        SweepError::Override {
-                            setting: point
-                                .iter()
-                                .map(Setting::to_string)
-                                .collect::<Vec<_>>()
-                                .join(" "),
-                            error,
-                        }
-                    })?),
+                    (Ok(()), Ok(t)) => Ok(grid_scenario(t, &name, point)?),
                     (Err(e), _) => Err(e.clone()),
                     (Ok(_), Err(e)) => Err(e.to_string()),
                 };
@@ -203,19 +293,14 @@ impl Plan {
                     .collect(),
                 Err(_) => vec![None; seeds],
             };
-            let point: String = group.point.iter().map(|s| format!("@{s}")).collect();
+            let point: Vec<String> = group.point.iter().map(Setting::to_string).collect();
             for (k, seed) in seeds_of.into_iter().enumerate() {
-                let suffix = if seeds > 1 {
-                    format!("#{k}")
-                } else {
-                    String::new()
-                };
                 items.push(Item {
                     index: items.len(),
                     group: g,
                     seed_index: k,
                     seed,
-                    id: format!("{}{point}{suffix}", stem(&group.file)),
+                    id: item_id(&stem(&group.file), &point, seeds, k),
                 });
             }
         }
@@ -260,13 +345,26 @@ impl Plan {
     pub fn info(&self, settings: Vec<String>) -> PlanInfo {
         let mut files: Vec<String> = self.groups.iter().map(|g| g.file_name.clone()).collect();
         files.dedup();
-        PlanInfo {
+        let scenarios = self
+            .groups
+            .iter()
+            .map(|g| match &g.scenario {
+                Ok(sc) => serde_json::to_string(sc).unwrap_or_else(|e| e.to_string()),
+                Err(e) => format!("error: {e}"),
+            })
+            .map(|text| digest(text.as_bytes()))
+            .collect();
+        let mut info = PlanInfo {
             files,
             seeds: self.seeds,
             vary: self.vary.iter().map(|v| v.spec.clone()).collect(),
             settings,
             items: self.items.iter().map(|i| i.id.clone()).collect(),
-        }
+            scenarios,
+            fingerprint: String::new(),
+        };
+        info.fingerprint = info.digest();
+        info
     }
 }
 
@@ -344,6 +442,34 @@ mod tests {
     }
 
     #[test]
+    fn a_grid_point_the_controller_refuses_is_an_error_naming_it_and_the_field() {
+        let files = &suite()[..1];
+        let vary = vec!["vehicle.max_speed=3,0.5".parse::<Vary>().unwrap()];
+        let e = Plan::new(files, 1, &vary).unwrap_err().to_string();
+        assert!(e.starts_with("--vary vehicle.max_speed=0.5: "), "{e}");
+        assert!(
+            e.ends_with(
+                "01-paper.toml with vehicle.max_speed=0.5: the controller's configuration \
+                 for it: planner.passage_speed: 1 exceeds vehicle.max_speed 0.5"
+            ),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_field_swept_twice_is_an_error() {
+        let vary: Vec<Vary> = ["steering.dead_time_s=0.02", "steering.dead_time_s=0.1"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let e = Plan::new(&suite()[..1], 1, &vary).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "--vary steering.dead_time_s is given twice: sweep each field once, with all its values"
+        );
+    }
+
+    #[test]
     fn a_setting_a_scenario_refuses_is_an_error_naming_it() {
         let files = &suite()[..1];
         let vary = vec!["steering.dead_time_s=0.1,7".parse::<Vary>().unwrap()];
@@ -360,7 +486,10 @@ mod tests {
                 .to_string()
                 .contains("--seeds 0")
         );
-        let huge = vec!["x=0:9999:1".parse::<Vary>().unwrap(); 2];
+        let huge = vec![
+            "x=0:9999:1".parse::<Vary>().unwrap(),
+            "y=0:9999:1".parse::<Vary>().unwrap(),
+        ];
         assert!(matches!(
             Plan::new(files, 100, &huge),
             Err(SweepError::TooMany(_))

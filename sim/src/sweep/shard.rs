@@ -14,11 +14,29 @@ pub const COUNT_VAR: &str = "JOB_COMPLETIONS";
 /// Most shards.
 pub const MAX_SHARDS: usize = 100_000;
 
-/// Shard `index` (0-based, like `JOB_COMPLETION_INDEX`) of `count`.
+/// Shard `index` (0-based, like `JOB_COMPLETION_INDEX`) of `count`; read from a shard
+/// file with the checks of `--shard` (`{"index": 5, "count": 3}` or 0/0 is refused).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "ShardFields")]
 pub struct Shard {
     pub index: usize,
     pub count: usize,
+}
+
+/// A shard as written in a shard file, before its checks.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ShardFields {
+    index: usize,
+    count: usize,
+}
+
+impl TryFrom<ShardFields> for Shard {
+    type Error = String;
+
+    fn try_from(s: ShardFields) -> Result<Shard, String> {
+        Shard::new(s.index, s.count).map_err(|e| format!("shard {}/{}: {e}", s.index, s.count))
+    }
 }
 
 impl fmt::Display for Shard {
@@ -125,6 +143,29 @@ mod tests {
         ] {
             let e = arg.parse::<Shard>().unwrap_err();
             assert!(e.contains(says), "{arg}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_shard_read_from_a_file_is_checked_like_the_argument() {
+        let read = |json: &str| serde_json::from_str::<Shard>(json).map_err(|e| e.to_string());
+        assert_eq!(
+            read(r#"{"index": 2, "count": 3}"#),
+            Ok(Shard { index: 2, count: 3 })
+        );
+        for (json, says) in [
+            (
+                r#"{"index": 5, "count": 3}"#,
+                "shard 5/3: the shard index is 0-based (like JOB_COMPLETION_INDEX): 0 to 2, is 5",
+            ),
+            (
+                r#"{"index": 0, "count": 0}"#,
+                "shard 0/0: the shard count must be 1 to 100000, is 0",
+            ),
+            (r#"{"index": 0, "count": 1, "of": 2}"#, "unknown field `of`"),
+        ] {
+            let e = read(json).unwrap_err();
+            assert!(e.contains(says), "{json}: {e}");
         }
     }
 

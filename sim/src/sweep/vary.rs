@@ -57,6 +57,15 @@ impl FromStr for Vary {
                 values.len()
             ));
         }
+        // The same value twice would plan the same deterministic runs twice and count
+        // them twice in every statistic.
+        for (i, v) in values.iter().enumerate() {
+            if let Some(earlier) = values[..i].iter().find(|w| same_value(w, v)) {
+                return Err(format!(
+                    "{key}: the value {v} is given twice (as {earlier} and {v}): each value is one grid point"
+                ));
+            }
+        }
         Ok(Vary {
             spec: arg.to_owned(),
             key,
@@ -112,6 +121,20 @@ fn value(text: &str) -> Result<toml::Value, String> {
             Err(format!("{text:?} is not a value: {}", e.message()))
         }
     })
+}
+
+/// Whether two values set a field alike: equal, numbers by value (`1` and `1.0`, which
+/// a float field reads alike).
+fn same_value(a: &toml::Value, b: &toml::Value) -> bool {
+    let number = |v: &toml::Value| match v {
+        toml::Value::Integer(i) => Some(*i as f64),
+        toml::Value::Float(f) => Some(*f),
+        _ => None,
+    };
+    match (number(a), number(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
 }
 
 /// Decimal places written in a number (`0.05` has 2), when it is written without an
@@ -306,6 +329,10 @@ mod tests {
             ("x=0:1000000:1", "at most 10000"),
             ("x=1e400", "is not a value"),
             ("x=1,,2", "is not a value"),
+            ("x=0.1,0.1", "x: the value 0.1 is given twice"),
+            ("x=0.1,0.2,0.10", "x: the value 0.1 is given twice"),
+            ("x=1,1.0", "x: the value 1.0 is given twice (as 1 and 1.0)"),
+            ("x=a,b,a", "x: the value \"a\" is given twice"),
         ] {
             let e = arg.parse::<Vary>().unwrap_err();
             assert!(e.contains(says), "{arg}: {e}");
