@@ -50,7 +50,8 @@ pub struct Waypoint {
     pub x: f64,
     pub y: f64,
     /// Local goals placed within this distance of the waypoint (along the route) are
-    /// moved onto it, so a plan passes through it, metres.
+    /// moved onto it, so a plan passes through it; the simulator's verdict counts the
+    /// waypoint passed when the rear axle comes this near it, in order, metres.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
     /// Heading a plan ending on the waypoint arrives with, degrees CCW from East;
@@ -118,6 +119,11 @@ impl Route {
     /// Total length, metres.
     pub fn length(&self) -> f64 {
         self.arc.last().copied().unwrap_or(0.0)
+    }
+
+    /// Arc length where the last leg (into the goal) begins, metres.
+    pub fn last_leg_start(&self) -> f64 {
+        self.arc.iter().rev().nth(1).copied().unwrap_or(0.0)
     }
 
     /// The vertices, start first, goal last.

@@ -16,6 +16,10 @@
 //!   along the route (1 m at a time, up to the goal) or, failing that, back towards
 //!   the car (down to `horizon_min_m`). A start-goal mission no longer than the
 //!   horizon is planned exactly as before: one leg, the goal as the local goal.
+//!   Arrival and "passed the goal" go by the progress along the whole route, not by
+//!   one leg: the goal's tolerance counts only with the progress on the last leg (or
+//!   that near the route's end), and the goal is passed only at the route's end, so a
+//!   route whose goal lies near or behind its start (a lap, a switchback) is driven.
 //! - Detours: when the local goal has no feasible path, other local goals (shifted
 //!   sideways, or at half the distance; [`Navigator::detours`]) are planned in the
 //!   order of their stated cost, each its own Qu et al. polynomial, and the first
@@ -140,6 +144,8 @@ pub enum Guidance {
 /// for (per call: progress is updated every control tick), metres.
 const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
+/// Progress this near the route's length is at its end (past the goal), metres.
+const ROUTE_END: f64 = 1e-9;
 /// Below this speed the car stands (for recovery, and at the end of a reversal), m/s.
 pub const STANDING: f64 = 0.05;
 /// A path being followed is kept past a replanning that finds none only with the car
@@ -161,8 +167,6 @@ pub struct Navigator {
     progress: f64,
     /// The frame of the active plan (or of the alignment turn).
     frame: PathFrame,
-    /// The last leg, for "passed the goal".
-    last_leg: PathFrame,
     law: SteeringLaw,
     active: Option<Trajectory>,
     /// The active path was planned around moving obstacles: drive its pace.
@@ -199,11 +203,9 @@ impl Navigator {
         let law = SteeringLaw::from_config(cfg)?;
         let route = Route::new(&cfg.mission);
         let points = route.points();
-        let last_leg = PathFrame::new(points[points.len() - 2], points[points.len() - 1]);
         Ok(Navigator {
             cfg: cfg.clone(),
             frame: PathFrame::new(points[0], points[1]),
-            last_leg,
             route,
             progress: 0.0,
             law,
@@ -674,12 +676,19 @@ impl Navigator {
     pub fn follow_ahead(&mut self, pose: &Pose, ahead: &Pose) -> Guidance {
         let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
         let to_goal = (pose.x - goal.0).hypot(pose.y - goal.1);
-        if to_goal <= self.cfg.mission.goal_tolerance {
+        self.progress = self.progress_at(pose);
+        // Arrival and "passed the goal" by progress along the whole route, never by one
+        // leg nor the distance alone: a route whose goal lies near or behind its start
+        // (a lap, a switchback) is driven first.
+        let tolerance = self.cfg.mission.goal_tolerance;
+        let left = self.route.length() - self.progress;
+        if to_goal <= tolerance
+            && (left <= tolerance || self.progress >= self.route.last_leg_start())
+        {
             return Guidance::Arrived;
         }
-        self.progress = self.progress_at(pose);
-        if self.last_leg.length - self.last_leg.to_path(pose.x, pose.y).0 <= 0.0 {
-            // Past the goal's x without reaching it: the polynomial cannot go back.
+        if left <= ROUTE_END {
+            // At the route's end without reaching the goal: the polynomial cannot go back.
             return Guidance::Stop {
                 reason: format!("passed the goal {to_goal:.2} m beside it"),
             };
@@ -1713,6 +1722,68 @@ mod tests {
         }
         // Without the cart the goal is free.
         assert!(!nav.request(0.0, &pose, &[]).goal_blocked);
+    }
+
+    /// A route from the start through `waypoints` to `goal`.
+    fn route_to(waypoints: &[(f64, f64)], goal: (f64, f64)) -> ControllerConfig {
+        let mut cfg = ControllerConfig::default();
+        cfg.mission.waypoints = waypoints
+            .iter()
+            .map(|&(x, y)| crate::route::Waypoint {
+                x,
+                y,
+                tolerance: 2.0,
+                heading_deg: None,
+                speed_limit: None,
+            })
+            .collect();
+        (cfg.mission.goal_x, cfg.mission.goal_y) = goal;
+        cfg
+    }
+
+    #[test]
+    fn a_route_whose_goal_lies_behind_its_start_is_driven_before_it_arrives() {
+        // A lap round a building ending 12 m behind the start on the line it began on,
+        // and a switchback (out 34 m, back 8 m over). Judged by the last leg alone the
+        // start was past the goal (a stop at t = 0); by the distance alone, backing
+        // onto the goal arrived.
+        let lap = route_to(
+            &[(20.0, 0.0), (20.0, 20.0), (-30.0, 20.0), (-30.0, 0.0)],
+            (-12.0, 0.0),
+        );
+        let switchback = route_to(&[(34.0, 0.0), (34.0, 8.0)], (0.0, 8.0));
+        for cfg in [lap, switchback] {
+            let mut nav = Navigator::new(&cfg).expect("navigator");
+            let start = car_at(0.0, 0.0, 0.0, 0.0);
+            let g = replan_and_follow(&mut nav, &start, &[]);
+            assert!(matches!(g, Guidance::Drive { .. }), "at the start: {g:?}");
+            let on_goal = car_at(cfg.mission.goal_x, cfg.mission.goal_y, 0.0, 0.0);
+            let g = nav.follow(&on_goal);
+            assert!(
+                !matches!(g, Guidance::Arrived),
+                "on the goal, route not driven"
+            );
+            // Along the route: no arrival and no "passed the goal" before its end.
+            let mut nav = Navigator::new(&cfg).expect("navigator");
+            let length = nav.route.length();
+            let (mut s, mut arrived) = (0.0, None);
+            while arrived.is_none() && s <= length + 1.0 {
+                let p = nav.route.at(s);
+                match nav.follow(&car_at(p.x, p.y, p.heading, 0.0)) {
+                    Guidance::Arrived => arrived = Some(s),
+                    Guidance::Stop { reason } => {
+                        assert!(!reason.contains("passed"), "{reason} at {s} of {length} m");
+                    }
+                    _ => {}
+                }
+                s += 0.25;
+            }
+            let at = arrived.expect("arrived at the route's end");
+            assert!(
+                at >= length - cfg.mission.goal_tolerance,
+                "{at} of {length} m"
+            );
+        }
     }
 
     #[test]
