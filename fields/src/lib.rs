@@ -6,7 +6,9 @@
 //!
 //! The checks ([`finite`], [`positive`], [`within`], ...) are the range checks every
 //! loader shares. Coordinates and sizes also have to survive the narrowing to `f32`
-//! that physics and wire formats do, so [`PLAUSIBLE_COORDINATE`] bounds positions.
+//! that physics and wire formats do, so [`PLAUSIBLE_COORDINATE`] bounds positions. A
+//! physical parameter has a [`Range`] that names its source, and a loader's table of
+//! them ([`Bound`] rows) is checked with [`check_bounds`].
 //!
 //! [`read_file`] and [`parse_toml`] read such a file, with a [`FileError`] that names
 //! it whatever went wrong.
@@ -19,9 +21,6 @@ use std::fmt;
 /// 1e5 m the physics' single precision no longer does, and beyond 3.4e38 values turn
 /// into infinities that collide with everything).
 pub const PLAUSIBLE_COORDINATE: f64 = 100_000.0;
-
-/// Sizes (radii, lengths, thicknesses) of things in the world, metres.
-pub const PLAUSIBLE_SIZE: f64 = 10_000.0;
 
 /// One step of a field path.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -286,11 +285,6 @@ pub fn coordinate(path: &FieldPath, v: f64) -> Result<(), FieldError> {
     )
 }
 
-/// A size, metres: above zero and at most [`PLAUSIBLE_SIZE`].
-pub fn size(path: &FieldPath, v: f64) -> Result<(), FieldError> {
-    positive_up_to(path, v, PLAUSIBLE_SIZE, "m")
-}
-
 /// An angle in degrees: finite and within ±360.
 pub fn angle_deg(path: &FieldPath, v: f64) -> Result<(), FieldError> {
     within(path, v, -360.0, 360.0, "degrees")
@@ -429,7 +423,6 @@ mod tests {
         assert!(non_negative(&p, 0.0).is_ok());
         assert!(coordinate(&p, 1e39).is_err());
         assert!(coordinate(&p, -99_999.0).is_ok());
-        assert!(size(&p, 1e7).is_err());
         let e = within(&p, 7.0, 0.0, 5.0, "m").err().map(|e| e.message);
         assert_eq!(e.as_deref(), Some("must be within [0, 5] m, is 7"));
     }
