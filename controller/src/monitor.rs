@@ -468,9 +468,11 @@ mod tests {
     fn a_slow_loop_a_ramped_stop_and_a_weak_brake_are_no_finding() {
         // The comparison study's slow speed loop (calibrated so), ramping down at 1
         // m/s^2 from 2 m/s, and the same stop with half the brake it asks for.
-        let mut v = Vehicle::default();
-        v.speed_dead_time_s = 0.3;
-        v.speed_time_constant_s = 1.5;
+        let v = Vehicle {
+            speed_dead_time_s: 0.3,
+            speed_time_constant_s: 1.5,
+            ..Vehicle::default()
+        };
         let ramp = |t: f64| ((2.0 - (t - 1.0).max(0.0)).max(0.0), 0.0);
         let mut m = ActuatorMonitor::new(&v);
         drive_loop(&mut m, (0.3, 1.5, 1.0, false), 2.0, 800, ramp);
