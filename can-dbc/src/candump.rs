@@ -43,6 +43,14 @@ pub enum CandumpError {
     Empty,
     #[error("unterminated timestamp '(' ")]
     Timestamp,
+    #[error(
+        "timestamp {0:?} is neither seconds (1700000000.123456) nor a date and time (2024-01-31 12:00:00.123456)"
+    )]
+    BadTimestamp(String),
+    #[error(
+        "{0:?} after the frame: one frame per line (only candump -x's direction, R or T, may follow it)"
+    )]
+    Trailing(String),
     #[error("no frame after the interface name")]
     MissingFrame,
     #[error("CAN ID {0:?} is not hexadecimal")]
@@ -105,6 +113,36 @@ pub fn parse_compact(frame: &str) -> Result<(u32, bool, bool, Vec<u8>), CandumpE
     Ok((id, extended, false, parse_hex_bytes(data)?))
 }
 
+/// Whether `ts` is a timestamp candump writes: seconds (`-l`, `-t a`, `-t d`, `-t z`:
+/// `1700000000.123456`) or a date and time (`-t A`: `2024-01-31 12:00:00.123456`).
+fn valid_timestamp(ts: &str) -> bool {
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    let seconds = |s: &str| {
+        let (whole, fraction) = s.split_once('.').unwrap_or((s, "0"));
+        digits(whole) && digits(fraction)
+    };
+    let fields = |s: &str, sep: char| s.split(sep).filter(|f| digits(f)).count();
+    match ts.split_once(' ') {
+        None => seconds(ts),
+        Some((date, time)) => {
+            let (clock, fraction) = time.split_once('.').unwrap_or((time, "0"));
+            date.split('-').count() == 3
+                && fields(date, '-') == 3
+                && clock.split(':').count() == 3
+                && fields(clock, ':') == 3
+                && digits(fraction)
+        }
+    }
+}
+
+/// What may follow a `candump -l` frame: nothing, or candump -x's direction.
+fn check_trailing(rest: &[&str]) -> Result<(), CandumpError> {
+    match rest {
+        [] | ["R" | "T"] => Ok(()),
+        [first, ..] => Err(CandumpError::Trailing(token(first))),
+    }
+}
+
 /// Parse one line in any of the supported forms.
 pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
     let mut rest = line.trim();
@@ -114,12 +152,18 @@ pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
     let mut timestamp = None;
     if let Some(after) = rest.strip_prefix('(') {
         let (ts, tail) = after.split_once(')').ok_or(CandumpError::Timestamp)?;
-        timestamp = Some(ts.trim().to_owned());
+        let ts = ts.trim();
+        if !valid_timestamp(ts) {
+            return Err(CandumpError::BadTimestamp(token(ts)));
+        }
+        timestamp = Some(ts.to_owned());
         rest = tail.trim_start();
     }
     let fields: Vec<&str> = rest.split_whitespace().collect();
     match fields.as_slice() {
         [] => Err(CandumpError::MissingFrame),
+        // A frame where the interface name goes: a second one follows it.
+        [first, second, ..] if first.contains('#') => Err(CandumpError::Trailing(token(second))),
         // `ID#DATA` alone (cansend form).
         [frame] if frame.contains('#') => {
             let (id, extended, remote, data) = parse_compact(frame)?;
@@ -132,8 +176,9 @@ pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
                 data,
             })
         }
-        // `iface ID#DATA [flags]` (candump -l).
-        [iface, frame, ..] if frame.contains('#') => {
+        // `iface ID#DATA [R|T]` (candump -l, with -x the direction).
+        [iface, frame, flags @ ..] if frame.contains('#') => {
+            check_trailing(flags)?;
             let (id, extended, remote, data) = parse_compact(frame)?;
             Ok(TextFrame {
                 timestamp,
@@ -154,6 +199,14 @@ pub fn parse_line(line: &str) -> Result<TextFrame, CandumpError> {
                 .filter(|l| *l <= 8)
                 .ok_or_else(|| CandumpError::BadLength(token(len)))?;
             let remote = bytes.first().is_some_and(|b| *b == "remote");
+            // `remote request`, and nothing after it.
+            let after = match bytes {
+                [_, "request", after @ ..] | [_, after @ ..] => after,
+                [] => &[],
+            };
+            if remote && !after.is_empty() {
+                return Err(CandumpError::Trailing(token(&after.join(" "))));
+            }
             let data = if remote {
                 Vec::new()
             } else {
@@ -281,6 +334,68 @@ mod tests {
             parse_line("vcan0 100#001122334455667788"),
             Err(CandumpError::TooLong(9))
         );
+    }
+
+    #[test]
+    fn timestamps_are_seconds_or_a_date_and_time() {
+        for ts in [
+            "1700000000.123456",
+            "000.000123",
+            "17",
+            "2024-01-31 12:00:00.123456",
+        ] {
+            let f = parse_line(&format!("({ts}) vcan0 100#00")).unwrap();
+            assert_eq!(f.timestamp.as_deref(), Some(ts));
+        }
+        for ts in [
+            "nan",
+            "",
+            "inf",
+            "-1.5",
+            "1e9",
+            "1.2.3",
+            "0x10",
+            "1.",
+            ".5",
+            "2024-01-31",
+            "2024-01-31 12:00",
+        ] {
+            assert_eq!(
+                parse_line(&format!("({ts}) vcan0 100#00")),
+                Err(CandumpError::BadTimestamp(ts.into())),
+                "{ts}"
+            );
+        }
+        assert_eq!(
+            parse_line("(nan) vcan0 100#00").unwrap_err().to_string(),
+            "timestamp \"nan\" is neither seconds (1700000000.123456) nor a date and time (2024-01-31 12:00:00.123456)"
+        );
+    }
+
+    #[test]
+    fn one_frame_per_line() {
+        for (line, extra) in [
+            ("(1.0) vcan0 100#00 (2.0) vcan0 101#01", "(2.0)"),
+            ("vcan0 100#00 vcan0 101#01", "vcan0"),
+            ("vcan0 100#00 101#01", "101#01"),
+            ("100#00 101#01", "101#01"),
+            ("vcan0 100#00 R T", "R"),
+            ("vcan0 080 [8] remote request vcan0 100#00", "vcan0 100#00"),
+        ] {
+            assert_eq!(
+                parse_line(line),
+                Err(CandumpError::Trailing(extra.into())),
+                "{line}"
+            );
+        }
+        assert_eq!(
+            parse_line("vcan0 100#00 101#01").unwrap_err().to_string(),
+            "\"101#01\" after the frame: one frame per line (only candump -x's direction, R or T, may follow it)"
+        );
+        // candump -l -x's direction is no frame.
+        for line in ["vcan0 100#00 R", "(1.5) vcan0 100#00 T"] {
+            assert_eq!(parse_line(line).unwrap().data, [0], "{line}");
+        }
     }
 
     #[test]

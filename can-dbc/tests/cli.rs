@@ -97,3 +97,47 @@ fn encode_counter_out_of_range_is_refused_naming_the_argument() {
         assert!(stderr.contains("--counter"), "{counter}: {stderr}");
     }
 }
+
+#[test]
+fn decode_refuses_a_timestamp_that_is_no_time_and_a_second_frame_on_a_line() {
+    let mut input = FRAME.to_vec();
+    input.extend_from_slice(b"(nan) vcan0 100#0000000000000000\n");
+    input.extend_from_slice(
+        b"(1700000000.000003) vcan0 100#0000000000000000 (1700000000.000004) vcan0 101#0000000000000000\n",
+    );
+    input.extend_from_slice(b"vcan0 100#0000000000000000 101#0000000000000000\n");
+    input.extend_from_slice(FRAME);
+    let (code, stdout, stderr) = ugv_can(&["decode", "--no-e2e"], input);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(decoded(&stdout), 2, "only the good lines: {stdout}");
+    for want in [
+        "line 2: timestamp \"nan\" is neither seconds",
+        "line 3: \"(1700000000.000004)\" after the frame: one frame per line",
+        "line 4: \"101#0000000000000000\" after the frame: one frame per line",
+        "3 malformed lines",
+    ] {
+        assert!(stderr.contains(want), "{want}: {stderr}");
+    }
+}
+
+#[test]
+fn encode_refuses_a_signal_given_twice() {
+    let (code, stdout, stderr) = ugv_can(
+        &[
+            "encode",
+            "STEERING_CMD",
+            "TargetAngle=1",
+            "Enable=1",
+            "targetangle=2",
+        ],
+        Vec::new(),
+    );
+    assert_eq!(code, Some(2), "{stdout} {stderr}");
+    assert!(
+        stderr.contains(
+            "TargetAngle is given twice (\"TargetAngle=1\" and \"targetangle=2\"): give each signal once"
+        ),
+        "{stderr}"
+    );
+    assert!(stdout.is_empty(), "{stdout}");
+}

@@ -158,3 +158,32 @@ fn refused_regressions_name_their_field() -> Result<()> {
     ensure!(checked >= 9, "only {checked} refused inputs found");
     Ok(())
 }
+
+/// Candump lines kept as `refused-<words>` in fuzz/regressions/candump_line/ (the
+/// parser of `ugv-can decode` once took `(nan)` for a time and dropped a second frame
+/// on a line): every line of each file must now be refused, its error holding the
+/// words (`refused-one-frame-per-line`: "one frame per line").
+#[test]
+fn refused_candump_lines_say_why() -> Result<()> {
+    let mut checked = 0;
+    for path in files(&fuzz_dir().join("regressions").join("candump_line"))? {
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        let Some(words) = name.strip_prefix("refused-") else {
+            continue;
+        };
+        let phrase = words.replace('-', " ");
+        let text = std::fs::read_to_string(&path)?;
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            match golf_car_can::candump::parse_line(line) {
+                Ok(frame) => bail!("{name}: {line:?} is accepted: {frame:?}"),
+                Err(e) => ensure!(e.to_string().contains(&phrase), "{name}: {line:?}: {e}"),
+            }
+            checked += 1;
+        }
+    }
+    ensure!(checked >= 10, "only {checked} refused candump lines found");
+    Ok(())
+}

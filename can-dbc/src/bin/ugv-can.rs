@@ -355,6 +355,8 @@ fn encode(network: &NetworkSpec, key: &str, pairs: &[String], counter: u8) -> Re
         );
     };
     let mut data = [0u8; 8];
+    // The pair that set each signal so far: a second would silently override it.
+    let mut given: BTreeMap<&str, &str> = BTreeMap::new();
     for pair in pairs {
         let Some((name, value)) = pair.split_once('=') else {
             bail!("{pair:?} is not SIGNAL=value");
@@ -374,6 +376,12 @@ fn encode(network: &NetworkSpec, key: &str, pairs: &[String], counter: u8) -> Re
         if signal.is_e2e() {
             bail!(
                 "{} is filled in by the E2E protection; use --counter",
+                signal.name
+            );
+        }
+        if let Some(earlier) = given.insert(signal.name.as_ref(), pair) {
+            bail!(
+                "{} is given twice ({earlier:?} and {pair:?}): give each signal once",
                 signal.name
             );
         }
