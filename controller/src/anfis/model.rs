@@ -272,6 +272,35 @@ impl AnfisModel {
         self.spec.inputs.iter().map(|i| i.name.as_str()).collect()
     }
 
+    /// Check that the model takes the inputs named `expected`, in this order: a caller
+    /// feeds inputs by position, so a model trained on other columns (or on these in
+    /// another order) would compute a wrong output without any error. The refusal
+    /// names the first input that differs.
+    pub fn check_input_names(&self, expected: &[&str]) -> Result<(), AnfisError> {
+        let found = self.input_names();
+        let wanted = format!("({}), in this order", expected.join(", "));
+        if found.len() != expected.len() {
+            return Err(AnfisError::InvalidModel {
+                field: "inputs".to_owned(),
+                reason: format!(
+                    "the model takes {} inputs ({}); they must be {wanted}",
+                    found.len(),
+                    found.join(", ")
+                ),
+            });
+        }
+        match found.iter().zip(expected).position(|(f, e)| f != e) {
+            None => Ok(()),
+            Some(i) => Err(AnfisError::InvalidModel {
+                field: format!("inputs[{i}].name"),
+                reason: format!(
+                    "is {:?} where {:?} is fed; the inputs must be {wanted}",
+                    found[i], expected[i]
+                ),
+            }),
+        }
+    }
+
     /// The output name.
     pub fn output_name(&self) -> &str {
         &self.spec.output

@@ -14,10 +14,6 @@ pub enum GuidanceError {
         #[source]
         source: AnfisError,
     },
-    #[error(
-        "the ANFIS model {path} takes {found} inputs; the follower gives 3 (e_y, e_theta, phi_ref)"
-    )]
-    AnfisInputs { path: String, found: usize },
 }
 
 /// Why a replanning has no outcome: the planner refused a problem of it. Each variant

@@ -39,21 +39,17 @@ pub enum SteeringLaw {
 
 impl SteeringLaw {
     /// The law the configuration asks for: the ANFIS model of its file (which must take
-    /// the follower's 3 inputs) for the ANFIS follower with a model, else the optimal
-    /// law.
+    /// the follower's inputs by name, [`FollowInputs::NAMES`] in this order: they are
+    /// fed by position) for the ANFIS follower with a model, else the optimal law.
     pub fn from_config(cfg: &ControllerConfig) -> Result<SteeringLaw, GuidanceError> {
         Ok(match (&cfg.follower.kind, &cfg.follower.anfis_model) {
             (FollowerKind::Anfis, Some(path)) => {
-                let model = AnfisModel::load(path).map_err(|source| GuidanceError::Anfis {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-                if model.n_inputs() != 3 {
-                    return Err(GuidanceError::AnfisInputs {
+                let model = AnfisModel::load(path)
+                    .and_then(|m| m.check_input_names(&FollowInputs::NAMES).map(|()| m))
+                    .map_err(|source| GuidanceError::Anfis {
                         path: path.display().to_string(),
-                        found: model.n_inputs(),
-                    });
-                }
+                        source,
+                    })?;
                 SteeringLaw::Anfis(Box::new(model))
             }
             _ => SteeringLaw::Optimal {
@@ -89,6 +85,58 @@ impl SteeringLaw {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A model of one bell per input and one rule, its inputs named `names`.
+    fn model_file(dir: &std::path::Path, names: &[&str]) -> std::path::PathBuf {
+        let inputs: Vec<serde_json::Value> = names
+            .iter()
+            .map(|n| {
+                serde_json::json!({"name": n, "range": [-1.0, 1.0],
+                                   "mfs": [{"a": 1.0, "b": 2.0, "c": 0.0}]})
+            })
+            .collect();
+        let model = serde_json::json!({
+            "format": "ugv-anfis", "version": 1, "inputs": inputs, "output": "phi",
+            "rules": [{"antecedent": vec![0; names.len()], "p": vec![0.0; names.len()], "r": 0.0}],
+        });
+        let path = dir.join(format!("{}.json", names.join("-")));
+        std::fs::write(&path, model.to_string()).unwrap();
+        path
+    }
+
+    #[test]
+    fn an_anfis_model_must_take_the_followers_inputs_by_name_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let load = |names: &[&str]| {
+            let mut cfg = ControllerConfig::default();
+            cfg.follower.kind = FollowerKind::Anfis;
+            cfg.follower.anfis_model = Some(model_file(dir.path(), names));
+            SteeringLaw::from_config(&cfg).map_err(|e| e.to_string())
+        };
+        assert!(matches!(
+            load(&["e_y", "e_theta", "phi_ref"]),
+            Ok(SteeringLaw::Anfis(_))
+        ));
+        for (names, says) in [
+            (
+                &["e_y", "phi_ref", "e_theta"][..],
+                "e_y-phi_ref-e_theta.json: invalid ANFIS model: inputs[1].name: is \"phi_ref\" \
+                 where \"e_theta\" is fed; the inputs must be (e_y, e_theta, phi_ref), in this order",
+            ),
+            (
+                &["x", "y", "z"][..],
+                "inputs[0].name: is \"x\" where \"e_y\" is fed",
+            ),
+            (
+                &["e_y", "e_theta"][..],
+                "invalid ANFIS model: inputs: the model takes 2 inputs (e_y, e_theta); they must be \
+                 (e_y, e_theta, phi_ref), in this order",
+            ),
+        ] {
+            let e = load(names).err().unwrap_or_default();
+            assert!(e.contains(says), "{names:?}\n got: {e}\nwant: {says}");
+        }
+    }
 
     #[test]
     fn optimal_law_corrects_towards_the_path() {
