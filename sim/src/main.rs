@@ -168,8 +168,9 @@ struct RunArgs {
     /// Scenario file (TOML); the seed paper's scenario when absent.
     scenario: Option<PathBuf>,
     /// Lockstep software-in-the-loop with the built-in controller library: no wires,
-    /// deterministic, faster than real time.
-    #[arg(long)]
+    /// deterministic, faster than real time (so no --controller, --controller-arg or
+    /// --wait-for-controller, which are for HIL).
+    #[arg(long, conflicts_with_all = ["controller", "controller_args", "wait_for_controller"])]
     sil: bool,
     /// CAN interface of the simulated ECUs (overrides the scenario's can.interface).
     #[arg(long)]

@@ -85,3 +85,23 @@ fn ugv_sim_numbers_out_of_range_are_refused_naming_the_argument() {
         assert_refused(args, argument, range);
     }
 }
+
+/// `run --sil` drives the built-in controller library: a controller binary to start
+/// or wait for is a usage error, not silently ignored.
+#[test]
+fn run_sil_refuses_the_arguments_of_an_external_controller() {
+    for (args, argument) in [
+        (&["--controller", "/bin/true"][..], "--controller <BINARY>"),
+        (&["--wait-for-controller"][..], "--wait-for-controller"),
+        (&["--controller-arg", "-v"][..], "--controller-arg"),
+    ] {
+        let mut all = vec!["run", "--sil"];
+        all.extend(args);
+        assert_refused(&all, argument, "cannot be used with");
+        // Either order.
+        let mut sil_last = vec!["run"];
+        sil_last.extend(args);
+        sil_last.push("--sil");
+        assert_refused(&sil_last, "--sil", "cannot be used with");
+    }
+}
