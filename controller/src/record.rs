@@ -218,7 +218,9 @@ pub fn timestamp(ns: u64) -> Timestamp {
 
 /// Direction of a frame seen from the ECUs' side of the bus (the simulator's, in its
 /// recordings): `rx` what the controller sends (towards the ECUs), `tx` what the ECUs
-/// send (towards the controller). The controller's own recording says the same.
+/// send (towards the controller). The controller's own recording goes by who sent
+/// each frame instead ([`Writer::can`]: a frame on its IDs from a second sender is one
+/// it received).
 pub fn direction(spec: &NetworkSpec, id: u32) -> &'static str {
     let controller = u16::try_from(id)
         .ok()
@@ -515,13 +517,18 @@ impl Writer {
     }
 
     /// One CAN frame on the bus at `t`, with the kernel's receive time when known
-    /// (bus.log then carries it, and `/can/raw` as `wall_unix_ns`).
+    /// (bus.log then carries it, and `/can/raw` as `wall_unix_ns`). A frame a port
+    /// kept (the controller's own recording) says whether the port sent it: a frame
+    /// it received goes on `/can/raw` as received (`"sent": false`, direction `tx`)
+    /// whatever its ID, so a second sender on the controller's IDs is not taken for
+    /// the controller.
     pub fn can(&mut self, t: f64, f: &TapFrame) {
         let TapFrame {
             id,
             extended,
             data,
             kernel,
+            sent,
         } = f;
         let (id, extended) = (*id, *extended);
         let ns = self.ns(t);
@@ -541,8 +548,14 @@ impl Writer {
             "id": id,
             "extended": extended,
             "data": hex,
-            "direction": direction(&self.spec, id),
+            "direction": match sent {
+                Some(false) => "tx",
+                Some(true) | None => direction(&self.spec, id),
+            },
         });
+        if let Some(sent) = sent {
+            raw["sent"] = (*sent).into();
+        }
         if let Some(k) = kernel {
             raw["wall_unix_ns"] = unix_ns(*k).into();
         }

@@ -87,6 +87,10 @@ pub struct TapFrame {
     pub data: Vec<u8>,
     /// The kernel's receive time, when known (a tap's socket, in HIL).
     pub kernel: Option<std::time::SystemTime>,
+    /// Whether the port that kept it sent it (`Some(true)`) or received it
+    /// (`Some(false)`, whatever its ID: a second sender on the port's own IDs); `None`
+    /// from a tap, which sees the bus and cannot tell.
+    pub sent: Option<bool>,
 }
 
 impl TapFrame {
@@ -97,6 +101,15 @@ impl TapFrame {
             extended,
             data: frame.data().to_vec(),
             kernel,
+            sent: None,
+        }
+    }
+
+    /// A frame a port sent (`true`) or received (`false`).
+    fn kept<F: Frame>(frame: &F, sent: bool) -> TapFrame {
+        TapFrame {
+            sent: Some(sent),
+            ..TapFrame::of(frame, None)
         }
     }
 }
@@ -213,7 +226,7 @@ where
             match self.bus.transmit(&frame) {
                 Ok(_) => {
                     if let Some(kept) = &mut self.kept {
-                        kept.push(TapFrame::of(&frame, None));
+                        kept.push(TapFrame::kept(&frame, true));
                     }
                     return Ok(());
                 }
@@ -254,7 +267,7 @@ where
     fn classify(&mut self, frame: &B::Frame) -> Received {
         let (id, extended) = raw_id(frame.id());
         if let Some(kept) = &mut self.kept {
-            kept.push(TapFrame::of(frame, None));
+            kept.push(TapFrame::kept(frame, false));
         }
         match self
             .rx

@@ -20,7 +20,9 @@ pub const OBSTACLES: &str = "/world/obstacles";
 /// controller, and the controller's own recording).
 pub const PLANS: &str = "/controller/plans";
 /// JSON `{"id", "extended", "data": hex, "direction": "rx"|"tx"}` (and
-/// `wall_unix_ns`, the kernel's receive time, in HIL), one per frame on the bus.
+/// `wall_unix_ns`, the kernel's receive time, in HIL), one per frame on the bus. The
+/// controller's own recording adds `"sent"`: `true` for a frame it sent (`rx`),
+/// `false` for one it received (`tx`), a second sender's on its own IDs included.
 pub const CAN_RAW: &str = "/can/raw";
 /// JSON `{"id", "message", "signals": {name: value}}` per golf_car.dbc, one per frame
 /// of a message the DBC defines.
