@@ -93,7 +93,11 @@ enum Command {
     /// Replay a recording (run.mcap) into the controller library in lockstep and
     /// compare its commands with the recorded ones: exactly for a SIL recording,
     /// within the HIL tolerance for a HIL one (see the README). Prints the report as
-    /// JSON. Exit code 0 when they agree, 1 at a divergence, 4 on error.
+    /// JSON. Exit code 0 when they agree, 1 at a divergence, 3 when the recording is
+    /// damaged or invalid (a record fails its CRC or its lengths, a message's time lies
+    /// outside the run, a channel or metadata the replay needs is missing or invalid:
+    /// the error names the file and the byte offset), 4 on any other error. A
+    /// recording cut by a kill is replayed up to the cut.
     Replay {
         /// The recording (run.mcap of a run's results).
         recording: PathBuf,
@@ -410,9 +414,16 @@ fn run_ecu(
 }
 
 fn replay(path: &std::path::Path, trace: Option<&std::path::Path>) -> Result<ExitCode> {
-    use ugv_sim::record::replay::{Recorded, Tolerance, replay};
+    use ugv_sim::record::replay::{DAMAGED_EXIT, Recorded, Tolerance, replay};
     let started = std::time::Instant::now();
-    let rec = Recorded::read(path)?;
+    let rec = match Recorded::read(path) {
+        Ok(rec) => rec,
+        Err(e) if e.is_damaged() => {
+            eprintln!("ugv-sim: {e}");
+            return Ok(ExitCode::from(DAMAGED_EXIT));
+        }
+        Err(e) => return Err(e.into()),
+    };
     let trace = trace
         .map(|p| {
             let file = std::fs::File::create(p)
@@ -423,7 +434,7 @@ fn replay(path: &std::path::Path, trace: Option<&std::path::Path>) -> Result<Exi
         .transpose()?;
     if let Some(why) = &rec.truncated {
         eprintln!(
-            "ugv-sim: {} ends early ({why}): replaying what it holds",
+            "ugv-sim: {} ends early ({why}): replaying up to the last instant it holds whole",
             path.display()
         );
     }

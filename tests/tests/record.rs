@@ -2,7 +2,8 @@
 //! run.mcap of a SIL run and finds the Foxglove schemas and the message counts the
 //! verdict implies; `ugv-can decode` (can-dbc's CLI) reads bus.log; a SIL recording
 //! replays into the controller byte for byte; a simulator killed with SIGKILL leaves
-//! an MCAP readable up to about a second before the kill.
+//! an MCAP readable up to about a second before the kill, which replays as recorded
+//! up to the cut; a damaged recording is refused with its own exit code.
 
 // Helpers outside #[test] functions unwrap and panic as the tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
@@ -18,7 +19,7 @@ use ugv_controller::trace::{Trace, TraceWriter};
 use ugv_e2e_tests::workspace_bin;
 use ugv_sim::Scenario;
 use ugv_sim::mission::controller_config;
-use ugv_sim::record::replay::{Recorded, Tolerance, replay};
+use ugv_sim::record::replay::{DAMAGED_EXIT, Recorded, Tolerance, replay};
 use ugv_sim::record::{BUS_LOG, MCAP_FILE, NMEA_FILE, RecordMode, RunInfo, topics};
 use ugv_sim::sil::{Hook, SilRun, run_sil_recorded, run_sil_with};
 use ugv_sim::verdict::Verdict;
@@ -456,14 +457,62 @@ fn a_killed_simulator_leaves_its_recording_readable_to_a_second_before() {
     let nmea = std::fs::read_to_string(dir.path().join(NMEA_FILE)).unwrap();
     assert!(!nmea.is_empty());
     let rec = Recorded::read(&dir.path().join(MCAP_FILE)).unwrap();
-    assert!(rec.truncated.is_some());
+    let why = rec.truncated.clone().unwrap();
+    assert!(why.starts_with("cut at byte "), "{why}");
     let report = replay(&rec, Tolerance::EXACT, None).unwrap();
     assert!(report.replayed_s >= ran - 1.5, "{report:?}");
-    // Up to where the file was cut the commands are the recorded ones; past it the
-    // replay may have produced one tick the file lost.
-    if let Some(d) = &report.divergence {
-        assert!(d.time_s >= report.replayed_s - 0.02, "{d:?}");
-    }
+    // Up to the last instant the file holds whole, the commands are the recorded ones
+    // (the tick the kill cut into is not compared).
+    assert_eq!(report.divergence, None, "{report:#?}");
+    let until = report.compared_until_s.unwrap();
+    assert!(report.replayed_s < until, "{report:?}");
+    // So says the command line, exit 0.
+    let out = Command::new(workspace_bin("ugv-sim").unwrap())
+        .arg("replay")
+        .arg(dir.path().join(MCAP_FILE))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("ends early (cut at byte "), "{stderr}");
+}
+
+/// A damaged recording is no divergence: `ugv-sim replay` exits 3 naming the file and
+/// the byte offset of the damaged record (one bit flipped in a chunk's records: its
+/// CRC), and says so in its help.
+#[test]
+fn a_damaged_recording_exits_3_naming_the_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    recorded_paper_run(dir.path(), Some(3.0));
+    let mut bytes = std::fs::read(dir.path().join(MCAP_FILE)).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x10;
+    let damaged = dir.path().join("damaged.mcap");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let e = Recorded::read(&damaged).unwrap_err();
+    assert!(e.is_damaged(), "{e}");
+    let sim = workspace_bin("ugv-sim").unwrap();
+    let out = Command::new(&sim)
+        .arg("replay")
+        .arg(&damaged)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(i32::from(DAMAGED_EXIT)), "{stderr}");
+    assert_eq!(DAMAGED_EXIT, 3);
+    assert!(
+        stderr.contains(&format!("{}: damaged at byte ", damaged.display()))
+            && stderr.contains("fails its CRC")
+            && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    assert!(out.stdout.is_empty(), "no report: {out:?}");
+    let help = Command::new(&sim)
+        .args(["replay", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(help.contains("3 when the recording is"), "{help}");
 }
 
 /// gps.nmea is the byte stream gpsfake replays into gpsd (Debian's gpsd-clients):
