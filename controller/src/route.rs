@@ -51,7 +51,8 @@ pub struct Waypoint {
     pub y: f64,
     /// Local goals placed within this distance of the waypoint (along the route) are
     /// moved onto it, so a plan passes through it; the simulator's verdict counts the
-    /// waypoint passed when the rear axle comes this near it, in order, metres.
+    /// waypoint passed once the car's progress along the route comes this near it,
+    /// metres.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
     /// Heading a plan ending on the waypoint arrives with, degrees CCW from East;
@@ -124,6 +125,11 @@ impl Route {
     /// Arc length where the last leg (into the goal) begins, metres.
     pub fn last_leg_start(&self) -> f64 {
         self.arc.iter().rev().nth(1).copied().unwrap_or(0.0)
+    }
+
+    /// The arc length at each vertex, 0 at the start, the length at the goal.
+    pub fn arc(&self) -> &[f64] {
+        &self.arc
     }
 
     /// The vertices, start first, goal last.

@@ -18,6 +18,7 @@ use crate::faults::{FaultRecord, Injector, Node, ProcessFault};
 use crate::measure::Jitter;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
+use crate::verdict::route::{RouteCheck, RouteReport};
 use crate::world::World;
 use firmware_bridge::laser::LaserFrame;
 
@@ -107,6 +108,8 @@ pub struct Sim<B> {
     /// which sees every frame but its own, and its own).
     bus: BusLoad,
     bus_frames_seen: u64,
+    /// The route followed (with waypoints): the goal counts only once it is driven.
+    route: Option<RouteCheck>,
 }
 
 /// How long the run goes on after the controller went away, waiting for both ECUs'
@@ -187,6 +190,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             faults: Injector::new(Vec::new(), 0),
             bus: BusLoad::new(golf_car_can::NETWORK.baudrate),
             bus_frames_seen: 0,
+            route: RouteCheck::new(&scenario),
             scenario,
         }
     }
@@ -294,6 +298,9 @@ impl<B: Can + QueueDrops> Sim<B> {
             self.trajectory.push((now, self.vehicle));
         }
 
+        if let Some(r) = &mut self.route {
+            r.update(now, self.vehicle.x, self.vehicle.y);
+        }
         // One distance query per obstacle gives both the clearance bookkeeping and the
         // collision verdict (a distance of zero is a touch or an overlap).
         let clear = self.world.clearances(&self.scenario.vehicle, &self.vehicle);
@@ -321,6 +328,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             }
         } else if self.scenario.success.reach_goal
             && self.distance_to_goal() <= self.scenario.goal.tolerance
+            && self.route.as_ref().is_none_or(RouteCheck::driven)
         {
             return Ok(Some(Outcome::GoalReached { time: now }));
         }
@@ -447,6 +455,10 @@ pub struct RunReport {
     pub faults: Vec<FaultRecord>,
     /// The bus's load against the DBC's bit rate (worst-case stuffing).
     pub bus_load: BusLoadReport,
+    /// With waypoints: which were passed in order, and how far along the route the car
+    /// got ([`crate::verdict::route`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub route: Option<RouteReport>,
 }
 
 impl<B: Can + QueueDrops> Sim<B> {
@@ -475,6 +487,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             safe_state: self.safe_state(),
             faults: self.fault_records(),
             bus_load: self.bus.report(),
+            route: self.route.as_ref().map(RouteCheck::report),
         }
     }
 }

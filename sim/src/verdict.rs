@@ -12,6 +12,8 @@ use crate::run::{Outcome, RunReport};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 
+pub mod route;
+
 /// Below this speed at the end, a stop counts as a stop, m/s.
 const STOPPED: f64 = 0.05;
 
@@ -86,7 +88,10 @@ impl Verdict {
         report: RunReport,
         trace: Option<&Trace>,
     ) -> Verdict {
-        let goal_reached = matches!(report.outcome, Outcome::GoalReached { .. });
+        // With waypoints the goal counts only once the route was driven (every
+        // waypoint passed in order): reaching its position by another way is no arrival.
+        let route_driven = report.route.as_ref().is_none_or(route::RouteReport::driven);
+        let goal_reached = route_driven && matches!(report.outcome, Outcome::GoalReached { .. });
         let collision = matches!(report.outcome, Outcome::Collision { .. });
         let mut failures = Vec::new();
         if collision {
@@ -97,6 +102,11 @@ impl Verdict {
                 "goal not reached ({:.2} m away)",
                 report.distance_to_goal
             ));
+        }
+        if scenario.success.reach_goal
+            && let Some(failure) = report.route.as_ref().and_then(route::RouteReport::failure)
+        {
+            failures.push(failure);
         }
         if !scenario.success.reach_goal && report.final_state.v.abs() > STOPPED {
             failures.push(format!(
@@ -123,7 +133,7 @@ impl Verdict {
                 .faults
                 .iter()
                 .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill)
-                || report.distance_to_goal <= scenario.goal.tolerance);
+                || (route_driven && report.distance_to_goal <= scenario.goal.tolerance));
         if let Outcome::Stopped { reason, .. } = &report.outcome
             && !planned_stop
         {

@@ -135,9 +135,14 @@ fn a_run_refuses_a_bus_where_another_controller_sends_heartbeats() -> Result<()>
     });
     let status = start_run(&vcan, dir.path(), "taken")?.wait()?;
     done.store(true, std::sync::atomic::Ordering::Relaxed);
-    other.join().map_err(|_| anyhow::anyhow!("the sender panicked"))??;
+    other
+        .join()
+        .map_err(|_| anyhow::anyhow!("the sender panicked"))??;
     let stderr = std::fs::read_to_string(dir.path().join("stderr"))?;
-    ensure!(status.code() == Some(4), "ugv-sim exit {status:?}:\n{stderr}");
+    ensure!(
+        status.code() == Some(4),
+        "ugv-sim exit {status:?}:\n{stderr}"
+    );
     ensure!(
         stderr.contains("another controller is on the bus") && stderr.contains("state auto"),
         "{stderr}"

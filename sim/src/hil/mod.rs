@@ -24,10 +24,7 @@ use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
-pub use process::{
-    ControllerProcess, close_on_exec_all, ensure_no_controller, spawn_controller,
-    wait_for_controller,
-};
+pub use process::{ControllerProcess, ensure_no_controller, spawn_controller, wait_for_controller};
 pub use wires::{WireMap, Wires, gateway_log};
 
 use crate::devices::gps::GpsError;

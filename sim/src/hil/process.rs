@@ -83,7 +83,8 @@ pub fn ensure_no_controller(iface: &str) -> Result<(), HilError> {
         listened_ms: BUS_LISTEN.as_millis(),
         state: format!("{state:?}").to_lowercase(),
         running: if running.is_empty() {
-            "no ugv-controller process on this machine: another machine or a board sends them".to_owned()
+            "no ugv-controller process on this machine: another machine or a board sends them"
+                .to_owned()
         } else {
             running.join("; ")
         },
@@ -185,7 +186,7 @@ pub fn spawn_controller(
 /// crates that call `openpty`, `socket` or `open` directly are not. The wires are all
 /// open before the controller starts, so none is opened between this and the fork.
 #[allow(unsafe_code)] // fcntl on the descriptors /proc lists: nix needs a BorrowedFd, whose making from a number is unsafe too
-pub fn close_on_exec_all() -> std::io::Result<()> {
+fn close_on_exec_all() -> std::io::Result<()> {
     for entry in std::fs::read_dir("/proc/self/fd")? {
         let Some(fd) = entry?
             .file_name()
