@@ -177,7 +177,12 @@ fn check_radius(field: &str, value: f64) -> Result<(), PlanError> {
 impl PlanProblem {
     /// Check the problem; the first offending field is named.
     pub fn validate(&self) -> Result<(), PlanError> {
+        // Values first, names only for the one that fails: validate runs for every
+        // candidate the planner scores, and building field names was most of its cost.
         for (name, s) in [("state", &self.state), ("goal", &self.goal)] {
+            if [s.x, s.y, s.theta, s.phi].iter().all(|v| v.is_finite()) {
+                continue;
+            }
             check_finite(&format!("{name}.x"), s.x)?;
             check_finite(&format!("{name}.y"), s.y)?;
             check_finite(&format!("{name}.theta"), s.theta)?;
@@ -194,6 +199,13 @@ impl PlanProblem {
         check_finite("wheelbase", self.wheelbase)?;
         check_finite("vehicle_radius", self.vehicle_radius)?;
         for (i, o) in self.obstacles.iter().enumerate() {
+            if [o.x, o.y, o.radius, o.vx, o.vy]
+                .iter()
+                .all(|v| v.is_finite())
+                && o.radius >= 0.0
+            {
+                continue;
+            }
             check_finite(&format!("obstacles[{i}].x"), o.x)?;
             check_finite(&format!("obstacles[{i}].y"), o.y)?;
             check_finite(&format!("obstacles[{i}].radius"), o.radius)?;
