@@ -4,7 +4,7 @@
 
 use ugv_controller::anfis::{AnfisModel, Dataset, TrainConfig, train};
 
-/// The inputs and target `scripts/compare-followers.sh` trains on (the columns of the
+/// The inputs and target `scripts/lab/compare-followers.sh` trains on (the columns of the
 /// controller's training.csv).
 const INPUTS: [&str; 3] = ["e_y", "e_theta", "phi_ref"];
 const TARGET: &str = "steer_cmd";

@@ -6,11 +6,11 @@
 # count. Where the kernel has no CAN, run it through the VM, with a CPU hog on the
 # host to measure it under load (README, "Real time on a busy machine"):
 #
-#   target/debug/vcan-setup vm [--host-nice N] -- bash scripts/hil-trials.sh [TRIALS] [PRIORITY]
+#   target/debug/vcan-setup vm [--host-nice N] -- bash scripts/lab/hil-trials.sh [TRIALS] [PRIORITY]
 #
 # Results under target/hil-trials/<priority>-<trial>/.
 set -uo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 
 trials=${1:-10}
 priority=${2:-40}

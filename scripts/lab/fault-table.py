@@ -7,7 +7,7 @@ Reads the summary.json of `ugv-sim suite` (or `ugv-sim merge`), whose items carr
 whole verdicts, and prints a Markdown table:
 
     ugv-sim suite sim/scenarios/faults --seeds 10 --results results/faults
-    python3 scripts/fault-table.py results/faults/summary.json
+    python3 scripts/lab/fault-table.py results/faults/summary.json
 """
 import json
 import sys

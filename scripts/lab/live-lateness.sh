@@ -5,14 +5,14 @@
 # and the scans the client received against the laser's 50 Hz. Needs vcan0, so run it
 # where the tests' vcan runs (natively, or in the VM):
 #
-#   target/debug/vcan-setup vm -- bash scripts/live-lateness.sh
+#   target/debug/vcan-setup vm -- bash scripts/lab/live-lateness.sh
 #
 # Uses the release binaries ($UGV_BIN_DIR, default target/release); leaves both runs
 # (verdicts, recordings) and the client's report in results/live-lateness/. CLIENT_NICE
 # runs the client at that niceness (default 0), CLIENT_WINDOW its count over that many
 # seconds (default 8: the drive lasts about 20).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 bin=${UGV_BIN_DIR:-$PWD/target/release}
 out=results/live-lateness
 rm -rf "$out"

@@ -12,7 +12,7 @@
 # their 95 % Wilson intervals.
 set -euo pipefail
 seeds=${SEEDS:-20}
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # The report's figures need matplotlib (not needed by the tests, so installed here).
 python3 -c 'import matplotlib' 2>/dev/null || python3 -m pip install --quiet 'matplotlib==3.11.2'
 # The workspace, not -p: another feature set would rebuild what the tests build.
@@ -33,7 +33,7 @@ done
     --target steer_cmd --mfs 2 --epochs 30 --output "$out/anfis.json" >"$out/anfis-training.json"
 
 # 3. The conditions: copies of the suite with the disturbance written into each file.
-python3 scripts/comparison-report.py conditions sim/scenarios/suite "$out/scenarios"
+python3 scripts/lab/comparison-report.py conditions sim/scenarios/suite "$out/scenarios"
 
 # 4. Both followers across the suite in every condition (exit code 1 means a failed
 #    scenario: reported, not fatal).
@@ -52,5 +52,5 @@ for f in optimal anfis; do
     cp "$out/paper-bias-$f/figure.png" "docs/comparison/paper-bias-$f.png"
 done
 
-python3 scripts/comparison-report.py report "$out" docs/comparison >docs/comparison.md
+python3 scripts/lab/comparison-report.py report "$out" docs/comparison >docs/comparison.md
 echo "report: docs/comparison.md"

@@ -7,12 +7,12 @@
 # Markdown table row per target: executions, seconds, executions per second, crashes,
 # corpus files before and after. Crash inputs land in fuzz/artifacts/<target>/.
 #
-#   bash scripts/fuzz-campaign.sh [TARGET...]     # all targets when none is named
+#   bash scripts/lab/fuzz-campaign.sh [TARGET...]     # all targets when none is named
 #
 # Needs the nightly toolchain and cargo-fuzz (installed here when missing); the
 # README's test command does not: it replays the corpora on stable.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 source scripts/env.sh
 
 RUNS=${RUNS:-10000000}

@@ -6,7 +6,7 @@
 # passed on a retry (FLAKY), failed, and the frames the guest's input backlog dropped
 # (runs.txt). Everything is left in results/vcan-load/.
 #
-#   bash scripts/vcan-load-check.sh [RUNS] [HOST_NICE] [HOG] [HOST_RT]
+#   bash scripts/lab/vcan-load-check.sh [RUNS] [HOST_NICE] [HOG] [HOST_RT]
 #
 # RUNS defaults to 10; HOST_NICE (QEMU's niceness on the host, vcan-setup vm
 # --host-nice) to its default -10; HOG=0 runs without the hog, for the comparison;
@@ -15,7 +15,7 @@
 # Needs the release binaries (cargo build --workspace --release) and the test
 # binaries built (cargo nextest run --no-run), so the guest compiles nothing.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 out=results/vcan-load
 
 if [ "${1:-}" = --in-vm ]; then
@@ -51,7 +51,7 @@ if [ "$hog" != 0 ]; then
     trap 'xargs kill <"$out/hog.pids" 2>/dev/null || true' EXIT
 fi
 echo "vcan group x $runs, hog on $(nproc) cores: $hog, QEMU niceness $host_nice, SCHED_RR $host_rt" | tee "$out/setup.txt"
-target/debug/vcan-setup vm --host-nice "$host_nice" --host-rt "$host_rt" -- bash scripts/vcan-load-check.sh --in-vm "$runs" |
+target/debug/vcan-setup vm --host-nice "$host_nice" --host-rt "$host_rt" -- bash scripts/lab/vcan-load-check.sh --in-vm "$runs" |
     tee "$out/runs.txt"
 python3 - "$out" "$runs" <<'EOF'
 import re, sys, pathlib

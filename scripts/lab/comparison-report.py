@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The follower comparison study (scripts/compare-followers.sh).
+"""The follower comparison study (scripts/lab/compare-followers.sh).
 
   comparison-report.py conditions SUITE_DIR OUT_DIR
       writes OUT_DIR/<condition>/*.toml: the suite's scenarios with each disturbance
@@ -300,7 +300,7 @@ def report(out, figures):
 
     L = ["# Optimal control law against ANFIS, nominal and under disturbances", ""]
     L.append(
-        "Made with `bash scripts/compare-followers.sh` (SIL, every scenario of "
+        "Made with `bash scripts/lab/compare-followers.sh` (SIL, every scenario of "
         f"`sim/scenarios/suite`, {len(names)} of them, {seeds} seeds each (`ugv-sim suite "
         f"--seeds {seeds}`), in {len(CONDITIONS)} conditions, with each follower: "
         f"{len(names) * seeds * len(CONDITIONS) * len(FOLLOWERS)} runs). ANFIS (first-order Sugeno, "

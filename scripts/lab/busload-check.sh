@@ -3,7 +3,7 @@
 # worst-case bit stuffing) against can-utils' canbusload on the same traffic. Needs
 # vcan0, so run it where the tests' vcan runs (natively, or in the VM):
 #
-#   target/debug/vcan-setup vm -- bash scripts/busload-check.sh
+#   target/debug/vcan-setup vm -- bash scripts/lab/busload-check.sh
 #
 # Uses the release binaries ($UGV_BIN_DIR, default target/release). canbusload prints
 # one line a second per interface: frames, bits with stuffing, payload bits, load %;
@@ -11,7 +11,7 @@
 # (-e) and none (-i). Prints the per-second series and both means over the seconds the
 # controller drove (frames seen), and leaves everything in results/busload-check/.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 bin=${UGV_BIN_DIR:-$PWD/target/release}
 out=results/busload-check
 rm -rf "$out"
