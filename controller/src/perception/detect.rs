@@ -123,6 +123,83 @@ impl View {
             .filter_map(|k| self.ranges.get(k))
             .any(|&range| f64::from(range) >= near)
     }
+
+    /// What this scan, taken from `laser` (world frame), saw at the world point `p`:
+    /// a surface there (within `tolerance` of the piece of surface its two nearest beams
+    /// returned from), free space (both beams went further, or returned nothing within
+    /// the range), or nothing to tell (out of the field of view or the range, hidden
+    /// behind something nearer, no echo, or beams that disagree).
+    pub fn surface_at(&self, laser: &Pose2, p: [f64; 2], tolerance: f64) -> Seen {
+        let (dx, dy) = (p[0] - laser.x, p[1] - laser.y);
+        let d = dx.hypot(dy);
+        let last = self.ranges.len() as f64 - 1.0;
+        if d.is_nan() || d > self.range_max || self.angle_increment == 0.0 || last < 0.0 {
+            return Seen::Unknown;
+        }
+        let bearing = firmware_bridge::geodesy::normalize_rad_pi(dy.atan2(dx) - laser.yaw);
+        let k = (bearing - self.angle_min) / self.angle_increment;
+        if !(0.0..=last).contains(&k) {
+            return Seen::Unknown;
+        }
+        // The beam's hit in the world frame, or None without a return; the range with it.
+        let hit = |k: usize| -> Option<(Option<[f64; 2]>, f64)> {
+            let range = f64::from(*self.ranges.get(k)?);
+            if range.is_nan() {
+                return None;
+            }
+            let a = laser.yaw + self.angle_min + k as f64 * self.angle_increment;
+            let point = (range <= self.range_max)
+                .then(|| [laser.x + range * a.cos(), laser.y + range * a.sin()]);
+            Some((point, range))
+        };
+        let (Some((h0, r0)), Some((h1, r1))) = (hit(k.floor() as usize), hit(k.ceil() as usize))
+        else {
+            return Seen::Unknown;
+        };
+        let near =
+            |h: Option<[f64; 2]>| h.is_some_and(|h| (h[0] - p[0]).hypot(h[1] - p[1]) <= tolerance);
+        let on_chord = match (h0, h1) {
+            (Some(a), Some(b)) => {
+                (a[0] - b[0]).hypot(a[1] - b[1]) <= CHORD_MAX
+                    && distance_to_segment(p, a, b) <= tolerance
+            }
+            _ => false,
+        };
+        if near(h0) || near(h1) || on_chord {
+            Seen::Surface
+        } else if r0.min(r1) > d + tolerance {
+            Seen::Free
+        } else {
+            Seen::Unknown
+        }
+    }
+}
+
+/// What an earlier scan saw at a point ([`View::surface_at`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Seen {
+    /// A surface, where the point is.
+    Surface,
+    /// Free space: its beams passed the point.
+    Free,
+    /// Nothing to tell.
+    Unknown,
+}
+
+/// Neighbouring beams' hits farther apart than this are not taken for one surface,
+/// metres.
+const CHORD_MAX: f64 = 0.5;
+
+/// Distance from `p` to the segment from `a` to `b`.
+pub(super) fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
 /// Detects the obstacles of one scan (no tracking): transformation, clustering and
@@ -347,6 +424,39 @@ pub fn cover_segment(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_earlier_view_tells_surface_free_space_and_the_unseen_apart() {
+        // Beams every degree from -10 to +10 degrees; a wall 5 m ahead across them, but
+        // beam 15 (+5 degrees) stopped at 3 m by something nearer, and no return on
+        // beams 0 and 1.
+        let mut ranges: Vec<f32> = (0..21)
+            .map(|i| (5.0 / (f64::from(i) - 10.0).to_radians().cos()) as f32)
+            .collect();
+        ranges[15] = 3.0;
+        ranges[0] = f32::INFINITY;
+        ranges[1] = f32::INFINITY;
+        let view = View {
+            angle_min: -10f64.to_radians(),
+            angle_increment: 1f64.to_radians(),
+            range_max: 20.0,
+            ranges,
+        };
+        // The laser at (1, 2) heading +x.
+        let laser = Pose2::new(1.0, 2.0, 0.0);
+        let at = |deg: f64, x: f64| {
+            let y = 2.0 + (x - 1.0) * deg.to_radians().tan();
+            view.surface_at(&laser, [x, y], 0.06)
+        };
+        assert_eq!(at(2.3, 6.0), Seen::Surface, "on the wall between two beams");
+        assert_eq!(at(2.3, 6.04), Seen::Surface, "within the tolerance");
+        assert_eq!(at(2.3, 5.8), Seen::Free, "in front of the wall");
+        assert_eq!(at(2.3, 6.3), Seen::Unknown, "behind the wall");
+        assert_eq!(at(5.0, 5.0), Seen::Unknown, "behind the nearer object");
+        assert_eq!(at(-9.5, 8.0), Seen::Free, "where nothing returned");
+        assert_eq!(at(30.0, 3.0), Seen::Unknown, "out of the field of view");
+        assert_eq!(at(0.0, 30.0), Seen::Unknown, "beyond the range");
+    }
 
     #[test]
     fn chain_spacing_respects_the_waist_condition() {

@@ -2,14 +2,17 @@
 //! tracks with the velocity their faces' normal motion gives, M-of-N birth, K-miss
 //! deletion, a local map of what is out of sight, and the planner's circles.
 
+use std::collections::VecDeque;
+
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
 use serde::{Deserialize, Serialize};
 
 use super::config::PerceptionConfig;
 use super::detect::{
-    CircleMeasurement, Detections, ObstacleKind, SegmentMeasurement, cover_segment, detect,
+    CircleMeasurement, Detections, ObstacleKind, Seen, SegmentMeasurement, View, cover_segment,
+    detect, distance_to_segment,
 };
-use super::frame::{Pose2, Scan};
+use super::frame::{Pose2, Scan, ScanPoint};
 use super::{PerceptionError, check_finite};
 use crate::planner::Obstacle;
 
@@ -322,6 +325,65 @@ impl PointTrack {
             cfg,
         )
     }
+
+    /// Measured standing still ([`cluster_still`]): the velocity is zero, known to
+    /// within [`STILL_SPEED`], whatever the centre's shifts made of it (a neighbour's
+    /// fragment taken for it, a window onto a larger object sliding as the view moves,
+    /// a cluster cut into other pieces than the last scan's), and motion starts anew.
+    fn hold_still(&mut self) {
+        self.state[2] = 0.0;
+        self.state[3] = 0.0;
+        for i in 0..4 {
+            for j in 2..4 {
+                self.cov[(i, j)] = 0.0;
+                self.cov[(j, i)] = 0.0;
+            }
+        }
+        self.cov[(2, 2)] = STILL_SPEED * STILL_SPEED;
+        self.cov[(3, 3)] = STILL_SPEED * STILL_SPEED;
+        self.moving_since = None;
+    }
+}
+
+/// An earlier scan, for [`cluster_still`].
+#[derive(Clone, Debug)]
+struct PastView {
+    stamp: f64,
+    /// The laser's pose in the world frame.
+    laser: Pose2,
+    view: View,
+}
+
+/// How far back the scan lies that a cluster's hits are compared with, at least,
+/// seconds: long enough for a walker at 0.5 m/s to leave the surface it showed (by
+/// 0.15 m, against `STILL_TOLERANCE`), short enough for a static object's view to
+/// overlap (the car moves 0.6 m at 2 m/s).
+const STILL_BASELINE_S: f64 = 0.3;
+/// How near a hit must lie to the earlier scan's surface to be on it, metres: the
+/// range noise of two scans (3 sigma of 12 mm each) and the spacing of beams on an
+/// oblique surface.
+const STILL_TOLERANCE: f64 = 0.06;
+/// The speed a still cluster may yet have, m/s: the tolerance over the baseline.
+const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
+
+/// Whether a cluster's `points` stand still since the scan `past`: at least half of
+/// them (and two) lie on a surface it saw there, and at most a tenth in the space its
+/// beams went through. The rest it could not see (hidden behind something nearer, or
+/// out of its view): a static object seen from a moving vehicle shows new parts of it,
+/// never a part where the earlier beams passed. An object moving at more than
+/// [`STILL_SPEED`] leaves its surface: crossing, its leading side stands where the
+/// beams passed; coming or going, most of its hits are off the earlier surface.
+fn cluster_still(points: &[ScanPoint], past: &PastView) -> bool {
+    let (mut surface, mut free) = (0usize, 0usize);
+    for p in points {
+        match past.view.surface_at(&past.laser, p.world, STILL_TOLERANCE) {
+            Seen::Surface => surface += 1,
+            Seen::Free => free += 1,
+            Seen::Unknown => {}
+        }
+    }
+    let n = points.len();
+    surface >= 2 && 2 * surface >= n && 10 * free <= n
 }
 
 /// `velocity` once it has been significant since `moving_since` for
@@ -455,6 +517,14 @@ impl WallTrack {
         confirmed_velocity(self.moving_since, self.velocity, stamp, cfg)
     }
 
+    /// Measured standing still ([`cluster_still`]): no velocity, along the wall
+    /// either (which its faces' normal motion cannot correct), and motion starts anew.
+    fn hold_still(&mut self) {
+        self.velocity = [0.0, 0.0];
+        self.normal_speed = self.normal_speed.map(|(n, _)| (n, 0.0));
+        self.moving_since = None;
+    }
+
     /// A static wall the local map keeps, out of sight wholly or in part.
     fn memorable(&self, stamp: f64, cfg: &PerceptionConfig) -> bool {
         self.life.memorable(cfg) && self.reported_velocity(stamp, cfg) == [0.0, 0.0]
@@ -557,6 +627,40 @@ fn rigid_velocity(faces: &[([f64; 2], f64)]) -> [f64; 2] {
     }
 }
 
+/// Each cluster's faces move together: sets the velocity of the walls that
+/// `wall_of` associates (with the segments of `detections`) from their cluster's
+/// faces, or holds them still when their cluster stands still.
+fn move_walls(
+    walls: &mut [WallTrack],
+    cfg: &PerceptionConfig,
+    detections: &Detections,
+    wall_of: &[Option<usize>],
+    still: &[bool],
+) {
+    let faces_of = |cluster: usize| -> Vec<([f64; 2], f64)> {
+        detections
+            .segments
+            .iter()
+            .zip(wall_of)
+            .filter(|(s, _)| s.cluster == cluster)
+            .filter_map(|(_, w)| w.and_then(|wi| walls.get(wi)?.normal_speed))
+            .collect()
+    };
+    let faces: Vec<_> = detections
+        .segments
+        .iter()
+        .map(|s| faces_of(s.cluster))
+        .collect();
+    for ((s, w), f) in detections.segments.iter().zip(wall_of).zip(&faces) {
+        if let Some(wall) = w.and_then(|wi| walls.get_mut(wi)) {
+            wall.set_velocity(f, detections.stamp, cfg);
+            if still.get(s.cluster) == Some(&true) {
+                wall.hold_still();
+            }
+        }
+    }
+}
+
 /// Association cost of a new segment to a wall (offset plus gap, metres), or None when
 /// outside the gates.
 fn wall_cost(
@@ -618,6 +722,9 @@ pub struct Perception {
     walls: Vec<WallTrack>,
     next_id: u64,
     last_stamp: Option<f64>,
+    /// The scans of the last `STILL_BASELINE_S` and the newest one before, for
+    /// [`Perception::still_clusters`].
+    past: VecDeque<PastView>,
 }
 
 impl Perception {
@@ -629,6 +736,7 @@ impl Perception {
             walls: Vec::new(),
             next_id: 1,
             last_stamp: None,
+            past: VecDeque::new(),
         })
     }
 
@@ -641,6 +749,7 @@ impl Perception {
         self.tracks.clear();
         self.walls.clear();
         self.last_stamp = None;
+        self.past.clear();
     }
 
     /// Detects and tracks one scan; `mount` is the laser's pose in the vehicle frame,
@@ -669,9 +778,18 @@ impl Perception {
         self.check_stamp(stamp)?;
         let dt = self.last_stamp.map_or(0.0, |last| stamp - last);
         self.last_stamp = Some(stamp);
-        let cfg = &self.cfg;
+        let still = self.still_clusters(detections);
+        self.track_points(detections, pose, dt, &still);
+        self.track_walls(detections, pose, &still);
+        Ok(self.output(stamp, pose, true))
+    }
 
-        // Posts and blobs.
+    /// Posts and blobs: predicts, associates, updates, remembers or misses, and
+    /// starts new tracks; `still` says which clusters stand still
+    /// ([`Perception::still_clusters`]).
+    fn track_points(&mut self, detections: &Detections, pose: &Pose2, dt: f64, still: &[bool]) {
+        let stamp = detections.stamp;
+        let cfg = &self.cfg;
         for t in &mut self.tracks {
             t.predict(dt, cfg);
         }
@@ -690,6 +808,9 @@ impl Perception {
                 if let Some(track) = self.tracks.get_mut(*ti) {
                     track.update(m, cfg);
                     track.last_hit = stamp;
+                    if still.get(m.cluster) == Some(&true) {
+                        track.hold_still();
+                    }
                 }
                 if let Some(u) = updated.get_mut(*ti) {
                     *u = true;
@@ -752,8 +873,14 @@ impl Perception {
                 self.next_id += 1;
             }
         }
+    }
 
-        // Walls.
+    /// Walls: associates segments, measures their motion, remembers or misses them,
+    /// and starts new ones; `still` as for [`Perception::track_points`].
+    fn track_walls(&mut self, detections: &Detections, pose: &Pose2, still: &[bool]) {
+        let stamp = detections.stamp;
+        let cfg = &self.cfg;
+        let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
         let mut candidates = Vec::new();
         for (ti, w) in self.walls.iter().enumerate() {
             for (mi, s) in detections.segments.iter().enumerate() {
@@ -780,26 +907,7 @@ impl Perception {
                 }
             }
         }
-        // Each cluster's faces move together.
-        let faces_of = |cluster: usize| -> Vec<([f64; 2], f64)> {
-            detections
-                .segments
-                .iter()
-                .zip(&wall_of)
-                .filter(|(s, _)| s.cluster == cluster)
-                .filter_map(|(_, w)| w.and_then(|wi| self.walls.get(wi)?.normal_speed))
-                .collect()
-        };
-        let faces: Vec<_> = detections
-            .segments
-            .iter()
-            .map(|s| faces_of(s.cluster))
-            .collect();
-        for (w, f) in wall_of.iter().zip(&faces) {
-            if let Some(wall) = w.and_then(|wi| self.walls.get_mut(wi)) {
-                wall.set_velocity(f, stamp, cfg);
-            }
-        }
+        move_walls(&mut self.walls, cfg, detections, &wall_of, still);
         // A new face of a tracked object moves with it: its velocity, per cluster.
         let motion_of_cluster = |cluster: usize| {
             detections
@@ -851,8 +959,44 @@ impl Perception {
                 self.next_id += 1;
             }
         }
+    }
 
-        Ok(self.output(stamp, pose, true))
+    /// Which clusters of `detections` stand still: most of their hits lie on the
+    /// surfaces the scan of at least `STILL_BASELINE_S` earlier saw in the same place,
+    /// and almost none in the space its beams went through ([`cluster_still`]). Keeps
+    /// the scan for the comparisons to come.
+    fn still_clusters(&mut self, detections: &Detections) -> Vec<bool> {
+        let stamp = detections.stamp;
+        let baseline = self
+            .past
+            .iter()
+            .rev()
+            .find(|v| stamp - v.stamp >= STILL_BASELINE_S - 1e-9);
+        let still = detections
+            .clusters
+            .iter()
+            .map(|c| {
+                baseline.is_some_and(|past| {
+                    detections
+                        .points
+                        .get(c.clone())
+                        .is_some_and(|points| cluster_still(points, past))
+                })
+            })
+            .collect();
+        self.past.push_back(PastView {
+            stamp,
+            laser: detections.laser,
+            view: detections.view.clone(),
+        });
+        while self
+            .past
+            .get(1)
+            .is_some_and(|v| stamp - v.stamp >= STILL_BASELINE_S - 1e-9)
+        {
+            self.past.pop_front();
+        }
+        still
     }
 
     /// Every track, tentative ones included, without the detection radius (for
@@ -1047,17 +1191,6 @@ fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f
         new.p0[1] + t * (new.p1[1] - new.p0[1]),
     ];
     Some(line_coords(old.p0, u, q).1)
-}
-
-fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let l2 = dx * dx + dy * dy;
-    let t = if l2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
 #[cfg(test)]
