@@ -92,10 +92,13 @@ mod error;
 mod follower;
 mod footprint;
 mod frame;
+mod lanes;
 mod pacing;
 mod reverse;
 mod search;
 mod solver;
+#[cfg(test)]
+mod traffic_tests;
 
 pub use align::Align;
 pub use error::{GuidanceError, ReplanError};
@@ -157,6 +160,14 @@ const KEEP_HEADING: f64 = 0.2;
 const KEEP_LEFT: f64 = 3.0;
 /// Step along a kept path at which it is checked against the obstacles, metres.
 const KEEP_CHECK_STEP: f64 = 0.25;
+/// Giving way to oncoming traffic ([`Navigator::yields`]): the car is at its stand
+/// within this of the farthest a stand could lie aside (the stands keep up to 0.45 m
+/// short of it: `search::YIELD_SLACKS`), metres; the stand lies at least this much
+/// beyond where the car can stop, metres, and this many metres along the route per
+/// metre aside.
+const YIELD_THERE: f64 = 0.6;
+const YIELD_MIN_RUN: f64 = 1.0;
+const YIELD_RUN_PER_M: f64 = 6.0;
 
 /// Replanning and following.
 #[derive(Debug)]
@@ -174,6 +185,9 @@ pub struct Navigator {
     /// The active path goes through a passage narrower than the planning circle:
     /// drive it at the passage speed.
     passage: bool,
+    /// That passage is narrow ahead of the car's nose ([`PlanRecord::narrow_ahead`]):
+    /// slow to the passage speed at once, not eased into.
+    narrow_ahead: bool,
     /// The last replanning found an obstacle on the mission's goal.
     goal_blocked: bool,
     /// Turning towards the goal on this road-wheel angle before planning, radians.
@@ -212,6 +226,7 @@ impl Navigator {
             active: None,
             paced: false,
             passage: false,
+            narrow_ahead: false,
             goal_blocked: false,
             aligning: None,
             next_replan: 0.0,
@@ -403,12 +418,7 @@ impl Navigator {
         let theta = wrap(pose.theta - frame.angle);
         let limit = (self.cfg.vehicle.max_steer_deg * pc.steer_usage).to_radians();
         let (leader, oncoming) = match any_moving {
-            true => pacing::traffic(
-                &problem.obstacles,
-                problem.state.x,
-                problem.state.y,
-                wide.r0,
-            ),
+            true => self.traffic(&problem, pose, wide.r0),
             false => (None, false),
         };
         let follow = leader.map(|l| l.pace);
@@ -478,6 +488,7 @@ impl Navigator {
             turn_radius: self.cfg.vehicle.wheelbase / limit.tan(),
             obstacles: obstacles.to_vec(),
         });
+        let yields = self.yields(now, pose, obstacles, s, &problem);
         PlanRequest {
             time: now,
             problem,
@@ -491,7 +502,80 @@ impl Navigator {
             pass,
             align,
             current_holds: self.current_path_holds(pose, obstacles),
+            yields,
         }
+    }
+
+    /// What the moving obstacles of the local goal's `problem` do ([`pacing::traffic`],
+    /// the car's circle `r0`): traffic overtaking the car is no leader to pace behind,
+    /// it moves away ([`lanes::overtaking`]).
+    fn traffic(
+        &self,
+        problem: &PlanProblem,
+        pose: &Pose,
+        r0: f64,
+    ) -> (Option<pacing::Leader>, bool) {
+        let f = self.footprint();
+        let (reach, half) = (f.front + r0, f.half_width + f.margin);
+        let ahead: Vec<planner::Obstacle> = problem
+            .obstacles
+            .iter()
+            .filter(|o| !lanes::overtaking(o, &problem.state, pose.v, reach, half))
+            .copied()
+            .collect();
+        pacing::traffic(&ahead, problem.state.x, problem.state.y, r0)
+    }
+
+    /// With oncoming traffic in view ([`lanes::oncoming`] in the local goal's
+    /// `problem`), the problems towards stands to give way at (`search::yield_goals`):
+    /// aside of the route to the side kept to as far as the car's rectangle allows,
+    /// far enough ahead to stop at from the car's speed at `follower.decel` and to
+    /// get there at a gentle angle; planned with the passages' circle. None once the
+    /// car is within [`YIELD_THERE`] of the farthest stand's offset: it stands and
+    /// waits.
+    fn yields(
+        &self,
+        now: f64,
+        pose: &Pose,
+        obstacles: &[Circle],
+        s: f64,
+        problem: &PlanProblem,
+    ) -> Vec<(PlanProblem, PathFrame)> {
+        if !problem
+            .obstacles
+            .iter()
+            .any(|o| lanes::oncoming(o, &problem.state))
+        {
+            return Vec::new();
+        }
+        let pc = &self.cfg.planner;
+        let side = if pc.keep_right { -1.0 } else { 1.0 };
+        let narrow = self.narrow();
+        let v = pose.v.max(0.0);
+        let stop = v * v / (2.0 * self.cfg.follower.decel.max(0.1))
+            + self.cfg.vehicle.coast_m(v)
+            + YIELD_MIN_RUN;
+        let here = self.route.at(s);
+        // The car's offset from the route, left positive.
+        let offset =
+            (pose.y - here.y) * here.heading.cos() - (pose.x - here.x) * here.heading.sin();
+        let stands = |run: f64| search::yield_goals(&self.route, &narrow, s, run, side, obstacles);
+        let Some((farthest, _)) = stands(stop) else {
+            return Vec::new();
+        };
+        let aside = farthest - side * offset;
+        if aside < YIELD_THERE {
+            return Vec::new();
+        }
+        let run = stop.max(YIELD_RUN_PER_M * aside);
+        let goals = stands(run).map_or_else(Vec::new, |(_, goals)| goals);
+        goals
+            .iter()
+            .map(|goal| {
+                let (p, f, _) = self.problem(now, pose, obstacles, &here, goal, narrow.r0);
+                (p, f)
+            })
+            .collect()
     }
 
     /// Whether the path being followed may be kept when a replanning finds no feasible
@@ -586,6 +670,7 @@ impl Navigator {
                     self.active = trajectory;
                     self.paced = record.moving;
                     self.passage = record.passage;
+                    self.narrow_ahead = record.narrow_ahead;
                     self.goal_blocked = record.goal_blocked;
                     self.aligning = record.align;
                 }
@@ -644,6 +729,7 @@ impl Navigator {
         let s = self.progress_at(pose);
         let towards = self.local_goal(s, obstacles);
         let towards = (towards.y - pose.y).atan2(towards.x - pose.x);
+        let speed = pc.reverse_speed.min(self.cfg.vehicle.max_speed);
         match Reverse::choose(
             (pose.x, pose.y, pose.theta),
             towards,
@@ -653,6 +739,8 @@ impl Navigator {
             obstacles,
             r0,
         ) {
+            // Traffic behind the car or on its way: wait for it, never back into it.
+            Some(r) if !r.clear_of_traffic(obstacles, r0, speed) => {}
             Some(r) => {
                 self.reversing = Some(r);
                 self.reversals += 1;
@@ -779,8 +867,18 @@ impl Navigator {
             f64::INFINITY
         };
         let room = to_goal.min(path.x_f() - x);
+        // Down to a slower pace, or the speed of a passage narrow only beside the car,
+        // it eases off at `follower.decel` (what the plans' schedules reckon with),
+        // never brakes: the speed loop (first order) follows a command held that far
+        // under the speed at that rate, where a step would brake at its own. A passage
+        // narrow ahead is entered at its speed.
+        let ease = match self.passage && self.narrow_ahead {
+            true => 0.0,
+            false => pose.v - f.decel * self.cfg.vehicle.speed_time_constant_s,
+        };
         let speed = pace
             .min(passage)
+            .max(ease)
             .min(
                 self.route
                     .speed_limit(self.progress)

@@ -3,6 +3,7 @@
 //! then replans.
 
 use super::frame::{Circle, clear_at, wrap};
+use super::lanes;
 
 /// Points checked per metre of a reverse path.
 const CHECKS_PER_M: f64 = 5.0;
@@ -97,6 +98,20 @@ impl Reverse {
             let (px, py, _) = self.pose_at(self.distance * j as f64 / n as f64);
             clear_at(px, py, obstacles, (self.x, self.y), r0)
         })
+    }
+
+    /// Whether the way back, driven at `speed` (m/s), is clear of traffic: no moving
+    /// obstacle is within `r0` of the rear axle's path, or comes there while the car
+    /// backs or soon after ([`lanes::clear_to_reverse`]).
+    pub fn clear_of_traffic(&self, obstacles: &[Circle], r0: f64, speed: f64) -> bool {
+        let n = (self.distance * CHECKS_PER_M).ceil().max(1.0) as usize;
+        let points: Vec<(f64, f64)> = (0..=n)
+            .map(|j| {
+                let (x, y, _) = self.pose_at(self.distance * j as f64 / n as f64);
+                (x, y)
+            })
+            .collect();
+        lanes::clear_to_reverse(&points, self.distance / speed.max(0.1), obstacles, r0)
     }
 
     /// The straight distance from the start to the end of the arc, metres.

@@ -123,6 +123,49 @@ pub(super) fn pass_goals(
         .collect()
 }
 
+/// Step of the search for how far aside a stand to give way at lies, metres.
+const YIELD_STEP: f64 = 0.1;
+/// The farthest a stand to give way at lies aside of the route, metres.
+const YIELD_MAX_SHIFT: f64 = 3.0;
+/// Stands to give way at keep this much short of the farthest clear one, nearest it
+/// first, so that the path there, its nose turned towards the side, still clears the
+/// obstacles beside it, metres.
+pub(super) const YIELD_SLACKS: [f64; 3] = [0.15, 0.3, 0.45];
+
+/// Stands to give way to oncoming traffic at: the route's point `run` ahead of
+/// progress `s`, moved to `side` (+1 left, -1 right) as far as the car, with the
+/// route's heading, still clears every static obstacle there and at the route's points
+/// a quarter, half and three quarters of the way ([`Clearance`]; with the car's
+/// rectangle: as far aside as the footprint, not the planning circle, allows), up to
+/// `YIELD_MAX_SHIFT`, less each of `YIELD_SLACKS`; and that farthest distance aside.
+/// None when the route's point itself is not clear.
+pub(super) fn yield_goals(
+    route: &Route,
+    clearance: &Clearance,
+    s: f64,
+    run: f64,
+    side: f64,
+    obstacles: &[Circle],
+) -> Option<(f64, Vec<RoutePoint>)> {
+    let along = |j: u32| route.at((s + run * f64::from(j) / 4.0).min(route.length()));
+    let steps = (YIELD_MAX_SHIFT / YIELD_STEP).round() as usize;
+    let base = along(4);
+    // As far aside as is clear along the way there (what lies beyond the laser's
+    // reach, perception cannot say).
+    let farthest = (0..=steps)
+        .map(|k| YIELD_STEP * k as f64)
+        .take_while(|&d| {
+            (1..=4).all(|j| clearance.goal_clear(&shifted(&along(j), side * d), obstacles))
+        })
+        .last()?;
+    let goals = YIELD_SLACKS
+        .iter()
+        .filter(|&&slack| slack < farthest)
+        .map(|slack| shifted(&base, side * (farthest - slack)))
+        .collect();
+    Some((farthest, goals))
+}
+
 /// Local goals to try when the first has no feasible path (detours): the first
 /// local goal shifted sideways by 1.5, 3 and 4.5 m, and the route's point at half
 /// its distance, unshifted and shifted the same; each clear ([`Clearance`], the goal

@@ -6,6 +6,7 @@ use super::align::Align;
 use super::error::ReplanError;
 use super::footprint::Footprint;
 use super::frame::PathFrame;
+use super::lanes::{self, Lanes};
 use super::pacing::{Pacing, sweep};
 use crate::planner::{self, Interval, Obstacle, PlanOptions, PlanProblem, Trajectory};
 
@@ -49,6 +50,17 @@ pub struct PlanRecord {
     /// moving one in space-time, driven at its pace ([`escape`]).
     #[serde(default)]
     pub escape: bool,
+    /// Oncoming traffic and no room to pass it on the side kept to: a slow path to a
+    /// stand as far to that side as the car's rectangle allows, there to wait
+    /// ([`PlanRequest::yields`]).
+    #[serde(default)]
+    pub yielding: bool,
+    /// A passage whose narrow part lies ahead of the car's nose (a static obstacle
+    /// there within the planning circle of the path): entered at the passage speed.
+    /// One whose narrow part is only beside the car (something that appeared there)
+    /// is eased into at the follower's deceleration.
+    #[serde(default)]
+    pub narrow_ahead: bool,
 }
 
 /// Passing slower traffic going the car's way: problems towards local goals on a lane
@@ -77,6 +89,11 @@ pub struct PlanRequest {
     /// plus the passage margin as the circle, each candidate path checked with
     /// `footprint`.
     pub passages: Vec<(PlanProblem, PathFrame)>,
+    /// With oncoming traffic in view, problems towards a stand on the side kept to (as
+    /// far to that side as the car's rectangle clears the static obstacles), planned
+    /// like the passages, tried at the slowest pace first when nothing else is feasible:
+    /// the car pulls over and waits there for the traffic to go by.
+    pub yields: Vec<(PlanProblem, PathFrame)>,
     /// The car's rectangle, grown by the passage margin.
     pub footprint: Footprint,
     /// An obstacle stands on the mission's goal ([`PlanRecord::goal_blocked`]).
@@ -171,14 +188,16 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
     for (problem, frame) in &req.passages {
         let mut outcome = towards(problem, *frame, Some(&req.footprint));
         if !no_path(&outcome) {
-            if let Ok((_, record)) = &mut outcome.result {
+            if let Ok((Some(t), record)) = &mut outcome.result {
                 record.passage = true;
+                let reach = problem.state.x + req.footprint.front;
+                record.narrow_ahead = narrow_ahead(problem, t, reach, req.problem.vehicle_radius);
             }
             return outcome;
         }
     }
     if let Some(pacing) = &req.pacing
-        && let Some(outcome) = escape(req, pacing)
+        && let Some(outcome) = give_way(req, pacing).or_else(|| escape(req, pacing))
     {
         return outcome;
     }
@@ -201,13 +220,6 @@ const STOP_WATCH_S: f64 = 5.0;
 /// a walker converging from beside or behind can leave no circle-clear path while the
 /// rectangle is clear. None when standing is safe, or no such path exists.
 pub(super) fn escape(req: &PlanRequest, pacing: &Pacing) -> Option<PlanOutcome> {
-    let moving = |q: &PlanProblem| -> Vec<Obstacle> {
-        q.obstacles
-            .iter()
-            .filter(|o| o.vx != 0.0 || o.vy != 0.0)
-            .copied()
-            .collect()
-    };
     let s = &req.problem.state;
     let coast = pacing.speed_now.powi(2) / (2.0 * pacing.decel.max(MIN_DECEL));
     let stand = (
@@ -223,23 +235,109 @@ pub(super) fn escape(req: &PlanRequest, pacing: &Pacing) -> Option<PlanOutcome> 
     }
     let goals =
         std::iter::once((&req.problem, req.frame)).chain(req.detours.iter().map(|(q, f)| (q, *f)));
+    let (chosen, frame) = rectangle_path(req, pacing, goals, &pacing.speeds, false)?;
+    let (trajectory, mut record) = record(req.time, &frame, Some(chosen), true);
+    record.escape = true;
+    Some(PlanOutcome {
+        time: req.time,
+        frame,
+        result: Ok((trajectory, record)),
+    })
+}
+
+/// Giving way to oncoming traffic when nothing else is feasible (the local goal, its
+/// detours and the passages all refused, every path into the traffic's lane among
+/// them): towards a stand on the side kept to ([`PlanRequest::yields`]), planned like
+/// a passage (the car's rectangle clearing the static obstacles) with the rectangle
+/// clearing every moving obstacle in space-time and keeping out of traffic's lanes,
+/// at the fastest pace that has such a path (the car must be aside before the traffic
+/// arrives). Driven at its pace and stopped at its end (the follower's stop within the
+/// room left), where the car stands and waits; the next replannings find the way on
+/// once the traffic has gone by. None when there is no stand to go to (the car is
+/// there already), or no such path.
+fn give_way(req: &PlanRequest, pacing: &Pacing) -> Option<PlanOutcome> {
+    let goals = req.yields.iter().map(|(q, f)| (q, *f));
+    let (chosen, frame) = rectangle_path(req, pacing, goals, &pacing.speeds, true)?;
+    let (trajectory, mut record) = record(req.time, &frame, Some(chosen), true);
+    record.yielding = true;
+    Some(PlanOutcome {
+        time: req.time,
+        frame,
+        result: Ok((trajectory, record)),
+    })
+}
+
+/// The moving obstacles of a problem.
+fn moving(q: &PlanProblem) -> Vec<Obstacle> {
+    q.obstacles
+        .iter()
+        .filter(|o| o.vx != 0.0 || o.vy != 0.0)
+        .copied()
+        .collect()
+}
+
+/// Whether `o` (a moving obstacle of a problem whose car is at `q.state`) overtakes
+/// the car or moves away from its path ([`lanes::overtaking`]).
+fn overtakes(req: &PlanRequest, pacing: &Pacing, q: &PlanProblem, o: &Obstacle) -> bool {
+    let f = &req.footprint;
+    lanes::overtaking(
+        o,
+        &q.state,
+        pacing.speed_now,
+        f.front + pacing.circle,
+        f.half_width + f.margin,
+    )
+}
+
+/// The lanes of the traffic meeting or overtaking the car in problem `q` ([`Lanes`]).
+fn traffic_lanes(req: &PlanRequest, pacing: &Pacing, q: &PlanProblem) -> Lanes {
+    let tracks: Vec<Obstacle> = moving(q)
+        .into_iter()
+        .filter(|o| lanes::oncoming(o, &q.state) || overtakes(req, pacing, q, o))
+        .collect();
+    Lanes::new(&tracks, &q.state, &req.footprint)
+}
+
+/// The first path, over `goals` in order and each at the paces of `speeds` in order,
+/// planned among the static obstacles alone (with the problem's circle), whose
+/// rectangle clears every moving obstacle in space-time (swept over the pace's time
+/// margin, as in planning) and keeps out of traffic's lanes ([`Lanes`]); with its
+/// frame. Giving way (`aside`), the rectangle must also clear the static obstacles (as
+/// through a passage), and a moving obstacle whose swept track the car already stands
+/// within the margin of is clipped to just clear of it: the car may only move away.
+fn rectangle_path<'a>(
+    req: &PlanRequest,
+    pacing: &Pacing,
+    goals: impl Iterator<Item = (&'a PlanProblem, PathFrame)>,
+    speeds: &[f64],
+    aside: bool,
+) -> Option<(Chosen, PathFrame)> {
     for (q, frame) in goals {
-        let tracks = moving(q);
+        let lanes = traffic_lanes(req, pacing, q);
         let mut statics = q.clone();
         statics.obstacles.retain(|o| o.vx == 0.0 && o.vy == 0.0);
+        let start = (q.state.x, q.state.y, q.state.theta);
+        let fits = aside.then(|| {
+            req.footprint
+                .clip_to_start(start.0, start.1, start.2, &statics.obstacles)
+        });
         let span = q.goal.x - q.state.x;
-        for &pace in &pacing.speeds {
+        for &pace in speeds {
             statics.t_f = q.t_k + span / pace;
             let margin = pacing.time_margin + pacing.schedule_slip(pace);
-            let clear = |t: &Trajectory| req.footprint.path_clear_of_moving(t, &tracks, margin);
+            let tracks = match aside {
+                true => req
+                    .footprint
+                    .clip_tracks_to_start(start, &moving(q), margin),
+                false => moving(q),
+            };
+            let clear = |t: &Trajectory| {
+                fits.as_ref().is_none_or(|o| req.footprint.path_clear(t, o))
+                    && req.footprint.path_clear_of_moving(t, &tracks, margin)
+                    && lanes.keeps_out(t, margin)
+            };
             if let Ok(Some(chosen)) = solve_one(&statics, req.steer_limit, &clear) {
-                let (trajectory, mut record) = record(req.time, &frame, Some(chosen), true);
-                record.escape = true;
-                return Some(PlanOutcome {
-                    time: req.time,
-                    frame,
-                    result: Ok((trajectory, record)),
-                });
+                return Some((chosen, frame));
             }
         }
     }
@@ -396,6 +494,7 @@ fn solve_towards(
     let fastest = speeds.iter().copied().fold(0.0, f64::max);
     let inflation = (pacing.circle - p.vehicle_radius).max(0.0);
     let start = (p.state.x, p.state.y, p.state.theta);
+    let lanes = traffic_lanes(req, pacing, p);
     let mut best: Option<(f64, Chosen)> = None;
     for &pace in speeds {
         // The paces come fastest first, and a slower one loses more time: once that
@@ -412,7 +511,9 @@ fn solve_towards(
         // Moving obstacles the car is already within the planning circle of (a walker
         // it is passing, or that passes it) are shrunk in the sweep so the car can
         // drive on; shrunk, they no longer keep the nose and the corners clear, so the
-        // car's rectangle must then clear their tracks in space-time as well.
+        // car's rectangle must then clear their tracks in space-time as well. Traffic
+        // overtaking the car is no disc at all: the car holds its line (keeps out of
+        // its lane) and its speed.
         let mut near = Vec::new();
         problem.obstacles = p
             .obstacles
@@ -420,6 +521,9 @@ fn solve_towards(
             .flat_map(|o| {
                 if o.vx == 0.0 && o.vy == 0.0 {
                     return vec![*o];
+                }
+                if overtakes(req, pacing, p, o) {
+                    return Vec::new();
                 }
                 let inflated = Obstacle {
                     radius: o.radius + inflation,
@@ -434,7 +538,9 @@ fn solve_towards(
             .collect();
         let near = req.footprint.clip_tracks_to_start(start, &near, margin);
         let clear = |t: &Trajectory| {
-            clear(t) && (near.is_empty() || req.footprint.path_clear_of_moving(t, &near, margin))
+            clear(t)
+                && (near.is_empty() || req.footprint.path_clear_of_moving(t, &near, margin))
+                && lanes.keeps_out(t, margin)
         };
         if let Some(c) = solve_one(&problem, req.steer_limit, &clear)? {
             let score = pacing.score(
@@ -448,6 +554,28 @@ fn solve_towards(
         }
     }
     Ok(record(req.time, frame, best.map(|b| b.1), true))
+}
+
+/// Whether a static obstacle of `problem` lying beyond `reach` (the car's nose, x in
+/// the planning frame) comes within the planning circle `r0` of the path `t`: the
+/// passage is narrow ahead of the car, not only beside it.
+fn narrow_ahead(problem: &PlanProblem, t: &Trajectory, reach: f64, r0: f64) -> bool {
+    let p = t.path();
+    let points: Vec<(f64, f64)> = (0..=40)
+        .map(|j| {
+            let x = p.x_k() + p.span() * f64::from(j) / 40.0;
+            (x, p.y(x))
+        })
+        .collect();
+    problem
+        .obstacles
+        .iter()
+        .filter(|o| o.vx == 0.0 && o.vy == 0.0 && o.x - o.radius > reach)
+        .any(|o| {
+            points
+                .iter()
+                .any(|&(x, y)| (x - o.x).hypot(y - o.y) < o.radius + r0)
+        })
 }
 
 /// The planner's time sampling in guidance: the bare method's 2048 steps per
@@ -547,6 +675,8 @@ fn record(
         kept: false,
         passing: false,
         escape: false,
+        yielding: false,
+        narrow_ahead: false,
     };
     (chosen.map(|c| c.trajectory), record)
 }
