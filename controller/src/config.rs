@@ -5,7 +5,15 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use ugv_fields::{FieldError, FieldPath, angle_deg, coordinate, positive_up_to, within};
+use ugv_fields::{
+    Bound, FieldError, FieldPath, Range, angle_deg, coordinate, positive_up_to, within,
+};
+
+use crate::ranges::{
+    ACCEL, BRAKE_DECEL, DEAD_TIME, GOAL_TOLERANCE, GPS_RATE, LENGTH, MARGIN, MAX_SPEED,
+    MAX_STEER_DEG, MOUNT, RADIUS, REAR_OVERHANG, SPEED, SPEED_TIME_CONSTANT, STEER_TIME_CONSTANT,
+    WHEELBASE, WIDTH,
+};
 
 /// Why a configuration was refused.
 pub type ConfigError = ugv_fields::FileError;
@@ -336,14 +344,14 @@ impl ControllerConfig {
     }
 
     /// The first field that makes no sense, and why: every physical parameter finite
-    /// and within its plausible range (the table [`crate::ranges::CONFIG`], each range
+    /// and within its plausible range (the table [`BOUNDS`], each range
     /// with its source: the golf car, the DBC's signal ranges, the datasheets), the
     /// fields' relations (speeds up to the top speed, the footprint inside the
     /// planning circle, a goal not reached at the start), and the perception tuning
     /// passes perception's own checks. `Controller::new` runs this too, so nothing
     /// builds a controller from a configuration `check-config` would refuse.
     pub fn validate(&self) -> Result<(), FieldError> {
-        ugv_fields::check_bounds(self, crate::ranges::CONFIG)?;
+        ugv_fields::check_bounds(self, BOUNDS)?;
         self.check_mission()?;
         self.check_vehicle()?;
         self.check_planner()?;
@@ -512,3 +520,203 @@ fn up_to_max_speed(path: &FieldPath, v: f64, max_speed: f64) -> Result<(), Field
     }
     Ok(())
 }
+
+/// One row of [`BOUNDS`]: `section.field` (always set) and its range.
+macro_rules! row {
+    ($section:ident . $field:ident, $range:expr) => {
+        Bound {
+            field: &[stringify!($section), stringify!($field)],
+            value: |c: &ControllerConfig| Some(f64::from(c.$section.$field)),
+            range: $range,
+        }
+    };
+}
+
+/// Every physical parameter of the controller's configuration and its range, in the
+/// order `validate` checks them (the first out of range is the error). The pace
+/// fractions (a list) are checked with the same [`Range`] in `validate`.
+pub const BOUNDS: &[Bound<ControllerConfig>] = &[
+    row!(mission.goal_tolerance, GOAL_TOLERANCE),
+    Bound {
+        field: &["mission", "goal_speed_limit"],
+        value: |c| c.mission.goal_speed_limit,
+        range: SPEED,
+    },
+    row!(vehicle.wheelbase, WHEELBASE),
+    row!(vehicle.max_steer_deg, MAX_STEER_DEG),
+    row!(
+        vehicle.steer_rate_deg_s,
+        Range::new(
+            0.0,
+            500.0,
+            "deg/s",
+            "the DBC's STEERING_CMD.MaxRate is 0-500 deg/s, 0 the ECU's own limit",
+        )
+    ),
+    row!(vehicle.max_speed, MAX_SPEED),
+    row!(vehicle.radius, RADIUS),
+    row!(vehicle.length, LENGTH),
+    row!(vehicle.width, WIDTH),
+    row!(vehicle.rear_overhang, REAR_OVERHANG),
+    row!(vehicle.antenna_x, MOUNT),
+    row!(vehicle.antenna_y, MOUNT),
+    row!(vehicle.laser_x, MOUNT),
+    row!(vehicle.laser_y, MOUNT),
+    row!(vehicle.steer_dead_time_s, DEAD_TIME),
+    row!(vehicle.steer_time_constant_s, STEER_TIME_CONSTANT),
+    row!(vehicle.speed_dead_time_s, DEAD_TIME),
+    row!(vehicle.speed_time_constant_s, SPEED_TIME_CONSTANT),
+    row!(vehicle.brake_decel, BRAKE_DECEL),
+    row!(
+        localisation.fix_time_constant_s,
+        Range::new(
+            0.0,
+            5.0,
+            "s",
+            "RTK fixed fixes at 1-20 Hz, 0: taken as they are"
+        )
+    ),
+    row!(
+        localisation.float_fix_time_constant_s,
+        Range::new(
+            0.0,
+            10.0,
+            "s",
+            "RTK float fixes wander over tens of seconds"
+        )
+    ),
+    row!(
+        localisation.steer_bias_gain,
+        Range::new(0.0, 1.0, "", "a fraction of the bias left")
+    ),
+    row!(
+        localisation.max_steer_bias_deg,
+        Range::new(
+            0.0,
+            10.0,
+            "degrees",
+            "a steering sensor's zero is off by a few degrees at most",
+        )
+    ),
+    row!(
+        planner.replan_period_s,
+        Range::new(
+            0.05,
+            5.0,
+            "s",
+            "the paper's T_s, 0.5 s here; 0.05 s is under a 25 Hz scan, 5 s is 33 m blind at 6.7 m/s",
+        )
+    ),
+    row!(
+        planner.horizon_m,
+        Range::new(
+            5.0,
+            200.0,
+            "m",
+            "within the laser's range: 20 m for the LMS111, 80 m for the LMS291",
+        )
+    ),
+    row!(
+        planner.horizon_min_m,
+        Range::new(2.0, 200.0, "m", "up to horizon_m")
+    ),
+    row!(planner.safety_margin, MARGIN),
+    row!(planner.passage_margin, MARGIN),
+    row!(planner.passage_speed, SPEED),
+    row!(planner.cruise_speed, SPEED),
+    row!(
+        planner.steer_usage,
+        Range::new(0.1, 1.0, "", "a fraction of the steering limit")
+    ),
+    row!(
+        planner.final_approach,
+        Range::new(
+            0.0,
+            20.0,
+            "m",
+            "no replanning on what the LMS111 (20 m) cannot see",
+        )
+    ),
+    row!(
+        planner.moving_time_margin_s,
+        Range::new(0.0, 10.0, "s", "timing errors of a tracked walker or cart")
+    ),
+    row!(planner.moving_margin, MARGIN),
+    row!(
+        planner.pace_time_weight,
+        Range::new(0.0, 1e6, "m^3/s", "a weight of the planner's cost")
+    ),
+    row!(planner.align_speed, SPEED),
+    row!(
+        planner.recover_after_s,
+        Range::new(0.1, 60.0, "s", "standing still before reversing")
+    ),
+    row!(
+        planner.reverse_distance_m,
+        Range::new(0.5, 10.0, "m", "a few car lengths back, blind behind")
+    ),
+    row!(
+        planner.reverse_speed,
+        Range::new(0.1, 2.0, "m/s", "walking pace, blind behind")
+    ),
+    row!(
+        planner.max_reversals,
+        Range::new(0.0, 10.0, "", "reversals before a controlled stop")
+    ),
+    row!(
+        planner.reversal_reset_m,
+        Range::new(1.0, 1000.0, "m", "progress along the route")
+    ),
+    row!(
+        follower.omega,
+        Range::new(
+            0.05,
+            20.0,
+            "rad/s",
+            "the lateral dynamics of a car; 0.9 rad/s here",
+        )
+    ),
+    row!(
+        follower.zeta,
+        Range::new(0.1, 10.0, "", "damping of the lateral dynamics; 0.8 here")
+    ),
+    row!(follower.max_lateral_accel, ACCEL),
+    row!(follower.decel, ACCEL),
+    row!(
+        follower.accel_limit,
+        Range::new(
+            0.0,
+            5.0,
+            "m/s^2",
+            "the DBC's THROTTLE_CMD.AccelLimit is 0-5 m/s^2, 0 the ECU's own limit",
+        )
+    ),
+    row!(safety.gps_rate_hz, GPS_RATE),
+    Bound {
+        field: &["safety", "gps_timeout_s"],
+        value: |c| c.safety.gps_timeout_s,
+        range: Range::new(0.05, 10.0, "s", "an epoch at 20 Hz up to 10 s"),
+    },
+    row!(
+        safety.laser_timeout_s,
+        Range::new(
+            0.05,
+            10.0,
+            "s",
+            "over a scan period: 20 ms for the LMS111 at 50 Hz",
+        )
+    ),
+    row!(
+        safety.report_timeout_s,
+        Range::new(
+            0.02,
+            10.0,
+            "s",
+            "over the ECUs' 10 ms report period (golf_car.dbc)",
+        )
+    ),
+    row!(
+        safety.settle_s,
+        Range::new(0.0, 10.0, "s", "inputs fresh before the ECUs are enabled")
+    ),
+];
