@@ -580,40 +580,7 @@ impl Controller {
     pub fn tick(&mut self, now: f64) -> Vec<GolfCarMessage> {
         let v = self.cfg.vehicle.clone();
         let limit = v.max_steer_deg.min(45.0);
-        // Mode transitions.
-        match self.mode.clone() {
-            Mode::WaitingForSensors => match self.loc.predict(now) {
-                Some(pose) if self.safety_check(now).is_ok() && self.loc.heading_known() => {
-                    // The first path is planned while the ECUs are still disabled.
-                    self.plan(now, &pose);
-                    let since = *self.ready_since.get_or_insert(now);
-                    if now - since >= self.cfg.safety.settle_s && self.nav.planned(&pose) {
-                        self.mode = Mode::Enabling { since: now };
-                    }
-                }
-                _ => self.ready_since = None,
-            },
-            Mode::Enabling { since } => {
-                if let Err((code, reason)) = self.safety_check(now) {
-                    self.estop(code, reason);
-                } else if self.steering.is_some_and(|s| s.1.enabled)
-                    && self.throttle.is_some_and(|t| t.1.enabled)
-                {
-                    self.mode = Mode::Auto;
-                } else if now - since > ENABLE_TIMEOUT {
-                    self.estop(
-                        FaultReportCode::ActuatorFault,
-                        "the ECUs did not enable".to_owned(),
-                    );
-                }
-            }
-            Mode::Auto | Mode::Arrived { stopped: false } => {
-                if let Err((code, reason)) = self.safety_check(now) {
-                    self.estop(code, reason);
-                }
-            }
-            Mode::Arrived { stopped: true } | Mode::Estop { .. } => {}
-        }
+        self.advance_mode(now);
 
         // What to ask of the actuators.
         let hold = self.measured_angle();
@@ -721,6 +688,60 @@ impl Controller {
                 ),
             };
 
+        self.messages(now, state, steer, drive, gear, hold)
+    }
+
+    /// The mode machine's transitions at `now`: start-up (sensors, the first plan,
+    /// the settling), enabling, and every safety check while driving.
+    fn advance_mode(&mut self, now: f64) {
+        match self.mode.clone() {
+            Mode::WaitingForSensors => match self.loc.predict(now) {
+                Some(pose) if self.safety_check(now).is_ok() && self.loc.heading_known() => {
+                    // The first path is planned while the ECUs are still disabled.
+                    self.plan(now, &pose);
+                    let since = *self.ready_since.get_or_insert(now);
+                    if now - since >= self.cfg.safety.settle_s && self.nav.planned(&pose) {
+                        self.mode = Mode::Enabling { since: now };
+                    }
+                }
+                _ => self.ready_since = None,
+            },
+            Mode::Enabling { since } => {
+                if let Err((code, reason)) = self.safety_check(now) {
+                    self.estop(code, reason);
+                } else if self.steering.is_some_and(|s| s.1.enabled)
+                    && self.throttle.is_some_and(|t| t.1.enabled)
+                {
+                    self.mode = Mode::Auto;
+                } else if now - since > ENABLE_TIMEOUT {
+                    self.estop(
+                        FaultReportCode::ActuatorFault,
+                        "the ECUs did not enable".to_owned(),
+                    );
+                }
+            }
+            Mode::Auto | Mode::Arrived { stopped: false } => {
+                if let Err((code, reason)) = self.safety_check(now) {
+                    self.estop(code, reason);
+                }
+            }
+            Mode::Arrived { stopped: true } | Mode::Estop { .. } => {}
+        }
+    }
+
+    /// The messages due at `now` for what is asked of the actuators: the heartbeat,
+    /// the commands and, in estop, the FAULT_REPORT; the monitors see them.
+    fn messages(
+        &mut self,
+        now: f64,
+        state: ControllerHeartbeatState,
+        steer: (bool, f64),
+        drive: (bool, f64, f64),
+        gear: ThrottleCmdGear,
+        hold: f64,
+    ) -> Vec<GolfCarMessage> {
+        let v = &self.cfg.vehicle;
+        let limit = v.max_steer_deg.min(45.0);
         let mut out = Vec::new();
         if now + 1e-9 >= self.next_heartbeat {
             out.push(GolfCarMessage::ControllerHeartbeat(ControllerHeartbeat {
