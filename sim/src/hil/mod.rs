@@ -324,6 +324,39 @@ pub struct HilOptions {
     /// [`firmware_bridge::realtime`]).
     pub rt_priority: u8,
 }
+/// The controller `ugv-sim run --controller` starts, once its bus is known to be free
+/// (none without --controller).
+fn start_controller(
+    options: &HilOptions,
+    iface: &str,
+    config_path: &std::path::Path,
+    wires: &WireMap,
+    trace_path: &std::path::Path,
+    log: &mut dyn FnMut(&str),
+) -> Result<Option<ControllerProcess>, HilError> {
+    let Some(binary) = &options.controller else {
+        return Ok(None);
+    };
+    ensure_no_controller(iface)?;
+    log(&format!(
+        "starting {} (configuration {})",
+        binary.display(),
+        config_path.display()
+    ));
+    // docs/recording.md: "The controller's own recording".
+    let own_log = options
+        .controller_log
+        .then(|| options.results.join(crate::record::CONTROLLER_LOG_DIR));
+    spawn_controller(
+        binary,
+        config_path,
+        wires,
+        trace_path,
+        own_log.as_deref(),
+        &options.controller_args,
+    )
+    .map(Some)
+}
 
 /// Run `scenario` in HIL with the controller configured by `config` on the endpoints
 /// the binary opened: start or wait for the controller, step in real time until the
@@ -398,29 +431,8 @@ pub fn run_scenario(
     write("controller.toml", toml::to_string_pretty(config)?)?;
     let trace_path = options.results.join("controller-trace.jsonl");
     let _ = std::fs::remove_file(&trace_path);
-    let mut controller = match &options.controller {
-        Some(binary) => {
-            ensure_no_controller(&iface)?;
-            log(&format!(
-                "starting {} (configuration {})",
-                binary.display(),
-                config_path.display()
-            ));
-            // README: "The controller's own recording".
-            let log = options
-                .controller_log
-                .then(|| options.results.join(crate::record::CONTROLLER_LOG_DIR));
-            Some(spawn_controller(
-                binary,
-                &config_path,
-                &wires.map,
-                &trace_path,
-                log.as_deref(),
-                &options.controller_args,
-            )?)
-        }
-        None => None,
-    };
+    let mut controller =
+        start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
     let board = matches!(sc.devices.controller, ControllerSite::Board { .. });
     if controller.is_none() && (options.wait_for_controller || board) {
         log(&format!(
