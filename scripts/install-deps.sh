@@ -121,6 +121,20 @@ if ((${#missing_pip[@]})); then
     if command -v pyenv >/dev/null 2>&1; then pyenv rehash || true; fi
 fi
 
+# ---------------------------------------------------------------- the Python example's venv
+# examples/python/ (a controller of its own on the wires, docs/wire-contract.md) runs in
+# a venv of its own with the packages pinned in its requirements.txt (pyserial,
+# iceoryx2's binding, python-can, cantools); rebuilt only when that file changes, so a
+# second run costs one cmp.
+EXAMPLE_DIR=$(cd "$(dirname "$0")/../examples/python" && pwd)
+if ! cmp -s "$EXAMPLE_DIR/requirements.txt" "$EXAMPLE_DIR/.venv/requirements.installed"; then
+    echo "install-deps: the Python example's venv (examples/python/.venv)"
+    "$PY" -m venv "$EXAMPLE_DIR/.venv"
+    "$EXAMPLE_DIR/.venv/bin/python" -m pip install -q --disable-pip-version-check \
+        -r "$EXAMPLE_DIR/requirements.txt"
+    cp "$EXAMPLE_DIR/requirements.txt" "$EXAMPLE_DIR/.venv/requirements.installed"
+fi
+
 # ---------------------------------------------------------------- cargo tools
 # clippy and rustfmt: scripts/test.sh checks lints and formatting; rustup's minimal
 # profile has neither.

@@ -29,12 +29,30 @@ use tracing_subscriber::EnvFilter;
 /// (firmware-bridge's warnings among them) to stderr, at the levels `RUST_LOG` names
 /// (`RUST_LOG=info`, `RUST_LOG=firmware_bridge=debug`), else at `default` and above.
 /// Once per process: later calls keep the first set-up.
+/// Colour ([`colour`]) only when stderr is a terminal and `NO_COLOR` is not set.
+/// iceoryx2, which logs through a logger of its own, logs errors only (`IOX2_LOG_LEVEL`
+/// overrides): its warning that no configuration file was found, printed when the
+/// first iceoryx2 node of the process starts, stays out of every run.
 pub fn init_logging(default: &str) {
+    use std::io::IsTerminal;
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
+    let ansi = colour(
+        std::io::stderr().is_terminal(),
+        std::env::var_os("NO_COLOR").as_deref(),
+    );
     let _ = tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
+        .with_ansi(ansi)
         .with_env_filter(filter)
         .try_init();
+}
+
+/// Whether log lines carry ANSI colour codes: only on a terminal (a log written to a
+/// file or a pipe stays plain text), and never while `NO_COLOR` is set to a non-empty
+/// value (<https://no-color.org>).
+pub fn colour(is_terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    is_terminal && no_color.is_none_or(|v| v.is_empty())
 }
 
 /// A number within `min..=max` (finite), `unit` named in the error.
@@ -97,6 +115,19 @@ pub fn seconds_or_zero(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        use std::ffi::OsStr;
+        assert!(colour(true, None));
+        assert!(
+            colour(true, Some(OsStr::new(""))),
+            "an empty NO_COLOR is unset"
+        );
+        assert!(!colour(true, Some(OsStr::new("1"))));
+        assert!(!colour(false, None), "a file or a pipe");
+        assert!(!colour(false, Some(OsStr::new("1"))));
+    }
 
     #[test]
     fn numbers_outside_their_range_are_refused_with_the_range() {

@@ -9,8 +9,9 @@
 //! ugv-sim check SCENARIO...                                           validate scenario files
 //! ```
 //!
-//! Exit codes of `run`: 0 goal reached, 1 collision, 2 time limit, 3 stopped (Ctrl-C),
-//! 4 error.
+//! Exit codes of `run` ([`RUN_EXIT_CODES`], shown by `run --help`): 0 passed, 1 failed
+//! its criteria, 2 usage error, 3 stopped (Ctrl-C, the controller exited), 4 setup or
+//! run error, 5 time limit.
 
 use std::io::IsTerminal;
 use std::net::SocketAddr;
@@ -55,6 +56,7 @@ struct Cli {
 enum Command {
     /// Run a scenario: in real time on the real wires (HIL; the default), or with the
     /// controller library in lockstep (--sil).
+    #[command(after_help = RUN_EXIT_CODES)]
     Run(RunArgs),
     /// Run every scenario of a folder in SIL, in parallel (with --seeds and --vary: a
     /// sweep; with --shard: a part of it), and write summary.md, summary.json,
@@ -470,12 +472,23 @@ fn replay(path: &std::path::Path, trace: Option<&std::path::Path>) -> Result<Exi
     })
 }
 
-fn exit_code(outcome: &Outcome) -> u8 {
+/// `ugv-sim run`'s exit codes, for `run --help` (docs/simulator.md says the same).
+const RUN_EXIT_CODES: &str = "Exit codes:
+  0  passed: the verdict's criteria are met (the goal reached, or a safe stop where the scenario asks for one)
+  1  failed its criteria: a collision, or the goal reached with a criterion missed (clearance, route, safe state)
+  2  usage error: the command line
+  3  stopped: Ctrl-C, or the controller exited
+  4  setup or run error: a bad scenario, a wire that cannot be opened, no controller within 60 s
+  5  time limit: the run reached sim.time_limit_s without passing";
+
+/// The exit code of a run that ended with `outcome` and a verdict that `passed` or not
+/// ([`RUN_EXIT_CODES`]; 2 and 4 come from clap and from `main`).
+fn exit_code(outcome: &Outcome, passed: bool) -> u8 {
     match outcome {
-        Outcome::GoalReached { .. } => 0,
-        Outcome::Collision { .. } => 1,
-        Outcome::TimeLimit { .. } => 2,
         Outcome::Stopped { .. } => 3,
+        _ if passed => 0,
+        Outcome::TimeLimit { .. } => 5,
+        Outcome::GoalReached { .. } | Outcome::Collision { .. } => 1,
     }
 }
 
@@ -567,7 +580,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
             verdict.time() / wall.max(1e-9)
         );
         println!("{}", serde_json::to_string_pretty(&verdict)?);
-        return Ok(ExitCode::from(exit_code(&run.outcome)));
+        return Ok(ExitCode::from(exit_code(&run.outcome, verdict.passed)));
     }
 
     let run_id = args
@@ -609,7 +622,7 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         eprintln!();
     }
     println!("{}", serde_json::to_string_pretty(&verdict)?);
-    Ok(ExitCode::from(exit_code(&outcome)))
+    Ok(ExitCode::from(exit_code(&outcome, verdict.passed)))
 }
 
 fn run_suite(args: SuiteArgs) -> Result<ExitCode> {

@@ -42,6 +42,12 @@ pub fn controller_config(scenario: &Scenario, follower: FollowerKind) -> Control
     v.speed_time_constant_s = scenario.throttle.time_constant_s;
     v.brake_decel = scenario.throttle.brake_decel;
     cfg.safety.gps_rate_hz = scenario.gps.rate_hz;
+    if let Some(d) = scenario.controller.seen_behind_m {
+        cfg.planner.seen_behind_at_start_m = d;
+    }
+    if let Some(w) = scenario.controller.seen_behind_width_m {
+        cfg.planner.seen_behind_at_start_width_m = w;
+    }
     if let Some(r) = scenario.controller.detection_radius {
         cfg.perception.detection_radius = r;
     }
@@ -62,4 +68,148 @@ pub fn checked_controller_config(
     cfg.follower.anfis_model = anfis_model;
     cfg.validate()?;
     Ok(cfg)
+}
+
+/// The version of `mission.toml`'s layout ([`MissionFile`]): raised when a key changes
+/// meaning or goes away.
+pub const MISSION_FILE_VERSION: u32 = 1;
+
+/// What a controller of one's own needs to know of a run, written as `mission.toml`
+/// beside `wires.json` (docs/wire-contract.md, "The mission"): the datum, the start, the
+/// route and the goal with their tolerances, and the car's geometry and sensor
+/// mounting. The same values as `controller.toml`'s `[mission]` and `[vehicle]`,
+/// without the project's controller's tuning.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MissionFile {
+    /// [`MISSION_FILE_VERSION`].
+    pub version: u32,
+    /// The origin of the world frame (x East, y North).
+    pub datum: firmware_bridge::geodesy::Datum,
+    pub start: StartFile,
+    pub goal: GoalFile,
+    /// Points to pass in order before the goal.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub waypoints: Vec<ugv_controller::route::Waypoint>,
+    pub vehicle: VehicleFile,
+}
+
+/// Where the rear axle starts, metres (its heading: the GPS's HDT).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct StartFile {
+    pub x: f64,
+    pub y: f64,
+}
+
+/// The goal: the run ends "goal reached" when the rear axle is within `tolerance`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct GoalFile {
+    pub x: f64,
+    pub y: f64,
+    pub tolerance: f64,
+    /// Degrees counter-clockwise from East.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading_deg: Option<f64>,
+    /// m/s on the last leg.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub speed_limit: Option<f64>,
+}
+
+/// The car: geometry (rear-axle frame, x forward, y left), limits, sensor mounting.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct VehicleFile {
+    pub wheelbase: f64,
+    pub max_steer_deg: f64,
+    pub max_speed: f64,
+    pub length: f64,
+    pub width: f64,
+    pub rear_overhang: f64,
+    pub antenna_x: f64,
+    pub antenna_y: f64,
+    pub laser_x: f64,
+    pub laser_y: f64,
+    pub laser_yaw_deg: f64,
+}
+
+/// The mission file of a run whose controller configuration is `config`.
+pub fn mission_file(config: &ControllerConfig) -> MissionFile {
+    let (m, v) = (&config.mission, &config.vehicle);
+    MissionFile {
+        version: MISSION_FILE_VERSION,
+        datum: m.datum,
+        start: StartFile {
+            x: m.start_x,
+            y: m.start_y,
+        },
+        goal: GoalFile {
+            x: m.goal_x,
+            y: m.goal_y,
+            tolerance: m.goal_tolerance,
+            heading_deg: m.goal_heading_deg,
+            speed_limit: m.goal_speed_limit,
+        },
+        waypoints: m.waypoints.clone(),
+        vehicle: VehicleFile {
+            wheelbase: v.wheelbase,
+            max_steer_deg: v.max_steer_deg,
+            max_speed: v.max_speed,
+            length: v.length,
+            width: v.width,
+            rear_overhang: v.rear_overhang,
+            antenna_x: v.antenna_x,
+            antenna_y: v.antenna_y,
+            laser_x: v.laser_x,
+            laser_y: v.laser_y,
+            laser_yaw_deg: v.laser_yaw_deg,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_mission_file_of_the_paper_and_of_a_route() -> Result<(), Box<dyn std::error::Error>> {
+        let paper = crate::Scenario::paper()?;
+        let text = toml::to_string_pretty(&mission_file(&controller_config(
+            &paper,
+            FollowerKind::Optimal,
+        )))?;
+        let value: toml::Table = toml::from_str(&text)?;
+        assert_eq!(value["version"].as_integer(), Some(1), "{text}");
+        assert_eq!(value["goal"]["x"].as_float(), Some(30.0), "{text}");
+        assert_eq!(value["goal"]["y"].as_float(), Some(15.0), "{text}");
+        assert_eq!(value["goal"]["tolerance"].as_float(), Some(1.0), "{text}");
+        assert_eq!(
+            value["datum"]["latitude"].as_float(),
+            Some(37.2307),
+            "{text}"
+        );
+        assert_eq!(
+            value["vehicle"]["antenna_x"].as_float(),
+            Some(0.5),
+            "{text}"
+        );
+        assert_eq!(value["vehicle"]["laser_x"].as_float(), Some(2.0), "{text}");
+        assert!(!value.contains_key("waypoints"), "{text}");
+        assert!(!value.contains_key("planner"), "no tuning: {text}");
+        // A route: its waypoints, in order, with their tolerances.
+        let mut route = paper;
+        route.waypoints = vec![ugv_controller::route::Waypoint {
+            x: 10.0,
+            y: 10.0,
+            tolerance: 1.5,
+            heading_deg: None,
+            speed_limit: None,
+        }];
+        let text = toml::to_string_pretty(&mission_file(&controller_config(
+            &route,
+            FollowerKind::Optimal,
+        )))?;
+        let value: toml::Table = toml::from_str(&text)?;
+        let points = value["waypoints"].as_array().ok_or("no waypoints")?;
+        assert_eq!(points.len(), 1, "{text}");
+        assert_eq!(points[0]["tolerance"].as_float(), Some(1.5), "{text}");
+        Ok(())
+    }
 }

@@ -6,9 +6,10 @@ use std::path::Path;
 use serde::Serialize;
 use ugv_controller::trace::Trace;
 
+use crate::busload::BusLoadReport;
 use crate::mode::Mode;
 use crate::plot::{Figure, PlannedPath, render};
-use crate::run::{Outcome, RunReport};
+use crate::run::{Outcome, RunReport, SafeStateReport};
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 
@@ -82,6 +83,9 @@ impl Verdict {
         }
     }
 
+    /// Judge a run: its outcome against the scenario's success criteria, the fault
+    /// plan's expectations, the bus load and the ECUs' safe state; with the
+    /// controller's summary when there is a trace.
     pub fn judge(
         mode: Mode,
         scenario: &Scenario,
@@ -97,109 +101,25 @@ impl Verdict {
         if collision {
             failures.push("collision".to_owned());
         }
-        if scenario.success.reach_goal && !goal_reached {
-            failures.push(format!(
-                "goal not reached ({:.2} m away)",
-                report.distance_to_goal
-            ));
-        }
-        if scenario.success.reach_goal
-            && let Some(failure) = report.route.as_ref().and_then(route::RouteReport::failure)
-        {
-            failures.push(failure);
-        }
-        if !scenario.success.reach_goal && report.final_state.v.abs() > STOPPED {
-            failures.push(format!(
-                "not stopped at the end ({:.2} m/s)",
-                report.final_state.v
-            ));
-        }
-        let closest = report
-            .min_clearance
-            .iter()
-            .cloned()
-            .fold(f64::INFINITY, f64::min);
-        if closest < scenario.success.min_clearance {
-            failures.push(format!(
-                "clearance {closest:.2} m below the required {:.2} m",
-                scenario.success.min_clearance
-            ));
-        }
-        // A stop the fault plan caused (the controller killed) is what it tests, and a
-        // controller that ended its mission at the goal (where the run does not end at
-        // the goal) arrived.
-        let planned_stop = !scenario.success.reach_goal
-            && (report
-                .faults
-                .iter()
-                .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill)
-                || (route_driven && report.distance_to_goal <= scenario.goal.tolerance));
-        if let Outcome::Stopped { reason, .. } = &report.outcome
-            && !planned_stop
-        {
-            failures.push(format!("stopped: {reason}"));
-        }
+        failures.extend(mission_failures(
+            scenario,
+            &report,
+            goal_reached,
+            route_driven,
+        ));
         failures.extend(crate::faults::inject::unmet(
             &scenario.expect,
             &report.faults,
             report.safe_state.as_ref().map(|s| s.noticed_s),
         ));
-        let load = &report.bus_load;
-        // With the wire's time (can.bit_timing: SIL's memory bus, HIL's paced sends)
-        // the bus carries no more than its bit rate: an overload shows as frames that
-        // waited for it.
-        let late = load.arbitration.as_ref().filter(|a| a.late > 0);
-        let overloaded = load.peak_pct > 100.0 || late.is_some();
-        if overloaded != scenario.expect.bus_overloaded {
-            failures.push(if let Some(a) = late {
-                format!(
-                    "the bus could not carry the schedule: {} frames waited over {:.0} ms for it (longest {:.1} ms), {} still waiting at the end",
-                    a.late,
-                    firmware_bridge::can::arbiter::LATE_WAIT_S * 1e3,
-                    a.max_wait_ms,
-                    a.backlog
-                )
-            } else if overloaded {
-                format!(
-                    "the bus would be overloaded: {:.0} % of {} kbit/s over the {:.0} ms to {:.2} s",
-                    load.peak_pct,
-                    load.bit_rate / 1000,
-                    crate::busload::PEAK_WINDOW_S * 1e3,
-                    load.peak_at_s
-                )
-            } else {
-                format!(
-                    "expected an overloaded bus, its peak load is {:.0} % of {} kbit/s",
-                    load.peak_pct,
-                    load.bit_rate / 1000
-                )
-            });
-        }
+        failures.extend(bus_load_failure(
+            &report.bus_load,
+            scenario.expect.bus_overloaded,
+        ));
         if let Some(s) = &report.safe_state {
-            for (name, e) in [("steering", &s.steering), ("throttle", &s.throttle)] {
-                if !e.within_bound {
-                    failures.push(match e.latency_ms {
-                        Some(l) => format!(
-                            "the {name} ECU reported its safe state {l:.1} ms after its last command, beyond its {:.0} ms",
-                            e.bound_ms
-                        ),
-                        None => format!("the {name} ECU never reported its safe state"),
-                    });
-                }
-            }
-            if s.stopped_s.is_none() {
-                failures.push("the car did not stop after the controller went away".to_owned());
-            }
+            failures.extend(safe_state_failures(s));
         }
-        let controller = trace.map(|t| ControllerSummary {
-            mode: serde_json::to_value(&t.mode).unwrap_or_default(),
-            tracking_error_rms: t.tracking_error_rms,
-            steering_effort_deg_s: steering_effort(t),
-            replans: t.plans.len(),
-            infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
-            stop_reason: t.stop_reason.clone(),
-            reversals: t.reversals,
-        });
+        let controller = trace.map(ControllerSummary::of);
         Verdict {
             mode,
             passed: failures.is_empty(),
@@ -212,6 +132,145 @@ impl Verdict {
             wires: None,
         }
     }
+}
+
+impl ControllerSummary {
+    /// The summary of the controller's trace.
+    fn of(t: &Trace) -> ControllerSummary {
+        ControllerSummary {
+            mode: serde_json::to_value(&t.mode).unwrap_or_default(),
+            tracking_error_rms: t.tracking_error_rms,
+            steering_effort_deg_s: steering_effort(t),
+            replans: t.plans.len(),
+            infeasible_replans: t.plans.iter().filter(|p| !p.feasible).count(),
+            stop_reason: t.stop_reason.clone(),
+            reversals: t.reversals,
+        }
+    }
+}
+
+/// How the run missed its mission, beyond a collision: the goal (and its route) not
+/// reached, not stopped at the end, too little clearance, stopped by anything but
+/// the fault plan or a mission ended at the goal.
+fn mission_failures(
+    scenario: &Scenario,
+    report: &RunReport,
+    goal_reached: bool,
+    route_driven: bool,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    if scenario.success.reach_goal && !goal_reached {
+        failures.push(format!(
+            "goal not reached ({:.2} m away)",
+            report.distance_to_goal
+        ));
+    }
+    if scenario.success.reach_goal && !goal_reached {
+        // A car that stood: say why an ECU never enabled (docs/wire-contract.md).
+        for (name, stats) in [
+            ("steering", &report.steering_can),
+            ("throttle", &report.throttle_can),
+        ] {
+            if stats.physical_reports.is_none()
+                && let Some(why) = never_enabled(&stats.enable)
+            {
+                failures.push(format!("the {name} ECU never enabled: {why}"));
+            }
+        }
+    }
+    if scenario.success.reach_goal
+        && let Some(failure) = report.route.as_ref().and_then(route::RouteReport::failure)
+    {
+        failures.push(failure);
+    }
+    if !scenario.success.reach_goal && report.final_state.v.abs() > STOPPED {
+        failures.push(format!(
+            "not stopped at the end ({:.2} m/s)",
+            report.final_state.v
+        ));
+    }
+    let closest = report
+        .min_clearance
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    if closest < scenario.success.min_clearance {
+        failures.push(format!(
+            "clearance {closest:.2} m below the required {:.2} m",
+            scenario.success.min_clearance
+        ));
+    }
+    // A stop the fault plan caused (the controller killed) is what it tests, and a
+    // controller that ended its mission at the goal (where the run does not end at
+    // the goal) arrived.
+    let planned_stop = !scenario.success.reach_goal
+        && (report
+            .faults
+            .iter()
+            .any(|f| f.fault.kind == crate::faults::FaultKind::ControllerKill)
+            || (route_driven && report.distance_to_goal <= scenario.goal.tolerance));
+    if let Outcome::Stopped { reason, .. } = &report.outcome
+        && !planned_stop
+    {
+        failures.push(format!("stopped: {reason}"));
+    }
+    failures
+}
+
+/// The bus load against the expectation (`expect.bus_overloaded`), if it fails it.
+fn bus_load_failure(load: &BusLoadReport, expect_overloaded: bool) -> Option<String> {
+    // With the wire's time (can.bit_timing: SIL's memory bus, HIL's paced sends)
+    // the bus carries no more than its bit rate: an overload shows as frames that
+    // waited for it.
+    let late = load.arbitration.as_ref().filter(|a| a.late > 0);
+    let overloaded = load.peak_pct > 100.0 || late.is_some();
+    if overloaded == expect_overloaded {
+        return None;
+    }
+    Some(if let Some(a) = late {
+        format!(
+            "the bus could not carry the schedule: {} frames waited over {:.0} ms for it (longest {:.1} ms), {} still waiting at the end",
+            a.late,
+            firmware_bridge::can::arbiter::LATE_WAIT_S * 1e3,
+            a.max_wait_ms,
+            a.backlog
+        )
+    } else if overloaded {
+        format!(
+            "the bus would be overloaded: {:.0} % of {} kbit/s over the {:.0} ms to {:.2} s",
+            load.peak_pct,
+            load.bit_rate / 1000,
+            crate::busload::PEAK_WINDOW_S * 1e3,
+            load.peak_at_s
+        )
+    } else {
+        format!(
+            "expected an overloaded bus, its peak load is {:.0} % of {} kbit/s",
+            load.peak_pct,
+            load.bit_rate / 1000
+        )
+    })
+}
+
+/// The ECUs' safe state after the controller went away: each reported within its
+/// bound, and the car stopped.
+fn safe_state_failures(s: &SafeStateReport) -> Vec<String> {
+    let mut failures = Vec::new();
+    for (name, e) in [("steering", &s.steering), ("throttle", &s.throttle)] {
+        if !e.within_bound {
+            failures.push(match e.latency_ms {
+                Some(l) => format!(
+                    "the {name} ECU reported its safe state {l:.1} ms after its last command, beyond its {:.0} ms",
+                    e.bound_ms
+                ),
+                None => format!("the {name} ECU never reported its safe state"),
+            });
+        }
+    }
+    if s.stopped_s.is_none() {
+        failures.push("the car did not stop after the controller went away".to_owned());
+    }
+    failures
 }
 
 /// Why results could not be written.
@@ -249,6 +308,37 @@ pub struct RunEnd<'a> {
 /// Judge a finished run of `scenario` (HIL or SIL alike), let `measured` add what
 /// only the mode knows (the HIL latency figures and wire statistics), and write the
 /// results into `dir` (see [`write_results`]).
+/// Why an ECU that never enabled did not, from what its commands asked
+/// ([`crate::ecu::safety::EnableRefusals`]); `None` when it was enabled at some time, or
+/// when no command asked it to.
+pub fn never_enabled(r: &crate::ecu::safety::EnableRefusals) -> Option<String> {
+    if r.ever_enabled {
+        return None;
+    }
+    let mut why = Vec::new();
+    if r.no_auto_heartbeat > 0 {
+        why.push(format!(
+            "{} Enable 0 -> 1 edge(s) without a CONTROLLER_HEARTBEAT auto in the last 100 ms",
+            r.no_auto_heartbeat
+        ));
+    }
+    if r.fault_latched > 0 {
+        why.push(format!(
+            "{} edge(s) while a fault was latched",
+            r.fault_latched
+        ));
+    }
+    if r.without_edge > 0 {
+        why.push(format!(
+            "{} command(s) with Enable = 1 that were no new 0 -> 1 edge (send 0, then 1, after a heartbeat auto)",
+            r.without_edge
+        ));
+    }
+    // No command asked it to enable: the controller never tried (or there was none),
+    // which the other failures describe.
+    (!why.is_empty()).then(|| why.join("; "))
+}
+
 pub fn judge_and_write(
     scenario: &Scenario,
     end: RunEnd<'_>,
@@ -300,6 +390,7 @@ pub fn write_results(
                 .map(|p| PlannedPath {
                     time: p.time,
                     points: p.path.clone(),
+                    manoeuvre: p.manoeuvre.clone(),
                 })
                 .collect()
         })

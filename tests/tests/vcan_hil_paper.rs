@@ -65,6 +65,12 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
     );
     ensure!(verdict["goal_reached"] == true && verdict["collision"] == false);
     ensure!(verdict["mode"] == "hil");
+    // iceoryx2's start-up warning (no configuration file) is silenced in ugv-sim and in
+    // the controller (whose stderr is ugv-sim's).
+    ensure!(
+        !stderr.contains("No config file was loaded"),
+        "iceoryx2's warning on stderr:\n{stderr}"
+    );
     let clearance = verdict["min_clearance"][0].as_f64().context("clearance")?;
     ensure!(clearance > 0.5, "min clearance {clearance}");
     // Every frame on the bus passed the E2E checks, both ways.

@@ -272,6 +272,39 @@ fn boot(
     kvm: bool,
     status_dir: &Path,
 ) -> Result<Option<u8>, VcanError> {
+    let mut cmd = vng_command(args, vng, kernel, kvm, status_dir)?;
+    let mut child = cmd.spawn().map_err(|source| VcanError::Io {
+        what: format!("starting {} through chrt and nice", vng.display()),
+        source,
+    })?;
+    let out = child.stdout.take().map(|o| forward(o, false));
+    let err = child.stderr.take().map(|e| forward(e, true));
+    let status = wait_for_vm(&mut child, kvm, status_dir)?;
+    for handle in [out, err].into_iter().flatten() {
+        let _ = handle.join();
+    }
+    let recorded = std::fs::read_to_string(status_dir.join("exit-code"))
+        .ok()
+        .and_then(|s| s.trim().parse::<u8>().ok());
+    if recorded.is_none() {
+        eprintln!(
+            "vcan-setup: the VM exited ({status}) without running the command{}",
+            if kvm { " (with KVM)" } else { "" }
+        );
+    }
+    Ok(recorded)
+}
+
+/// The command that boots the VM: vng (under chrt and nice) running `kernel` with
+/// the working directory, the `--rwdir`s and `status_dir` writable, and this binary's
+/// `vm-guest` inside, which sets up the interfaces and runs the command.
+fn vng_command(
+    args: &VmArgs,
+    vng: &Path,
+    kernel: &Path,
+    kvm: bool,
+    status_dir: &Path,
+) -> Result<Command, VcanError> {
     let cwd = std::env::current_dir().map_err(|source| VcanError::Io {
         what: "reading the working directory".to_owned(),
         source,
@@ -280,17 +313,8 @@ fn boot(
         what: "locating vcan-setup itself".to_owned(),
         source,
     })?;
-    // Through util-linux's chrt when the host lets us, then coreutils' nice, which
-    // runs the command even when it may not set the niceness (and says why).
-    let mut cmd = match host_rt(args.host_rt) {
-        Some(prio) => {
-            let mut c = Command::new("chrt");
-            c.args(["--rr", &prio.to_string(), "nice"]);
-            c
-        }
-        None => Command::new("nice"),
-    };
-    cmd.args(["-n", &args.host_nice.to_string()]).arg(vng);
+    let mut cmd = prioritised(args);
+    cmd.arg(vng);
     cmd.arg("--run").arg(kernel);
     if !kvm {
         cmd.arg("--disable-kvm");
@@ -338,23 +362,43 @@ fn boot(
         .stderr(Stdio::piped());
     // A group of its own: a hung boot is stopped with vng's QEMU and all.
     cmd.process_group(0);
-    let mut child = cmd.spawn().map_err(|source| VcanError::Io {
-        what: format!("starting {} through chrt and nice", vng.display()),
-        source,
-    })?;
-    let out = child.stdout.take().map(|o| forward(o, false));
-    let err = child.stderr.take().map(|e| forward(e, true));
+    Ok(cmd)
+}
+
+/// `nice -n HOST_NICE`, through util-linux's chrt when the host lets us, then
+/// coreutils' nice, which runs the command even when it may not set the niceness
+/// (and says why).
+fn prioritised(args: &VmArgs) -> Command {
+    let mut cmd = match host_rt(args.host_rt) {
+        Some(prio) => {
+            let mut c = Command::new("chrt");
+            c.args(["--rr", &prio.to_string(), "nice"]);
+            c
+        }
+        None => Command::new("nice"),
+    };
+    cmd.args(["-n", &args.host_nice.to_string()]);
+    cmd
+}
+
+/// Wait for the VM to exit; with KVM, stop it when the guest has not started the
+/// command within [`KVM_BOOT_LIMIT`] (some hosts offer /dev/kvm and hang the guest).
+fn wait_for_vm(
+    child: &mut std::process::Child,
+    kvm: bool,
+    status_dir: &Path,
+) -> Result<std::process::ExitStatus, VcanError> {
     let waited = |e| VcanError::Io {
         what: "waiting for the VM".to_owned(),
         source: e,
     };
     let started = Instant::now();
-    let status = loop {
+    loop {
         if !kvm || status_dir.join(BOOTED).exists() {
-            break child.wait().map_err(waited)?;
+            return child.wait().map_err(waited);
         }
         if let Some(status) = child.try_wait().map_err(waited)? {
-            break status;
+            return Ok(status);
         }
         if started.elapsed() > KVM_BOOT_LIMIT {
             eprintln!(
@@ -367,23 +411,10 @@ fn boot(
                     nix::sys::signal::Signal::SIGKILL,
                 );
             }
-            break child.wait().map_err(waited)?;
+            return child.wait().map_err(waited);
         }
         std::thread::sleep(Duration::from_millis(200));
-    };
-    for handle in [out, err].into_iter().flatten() {
-        let _ = handle.join();
     }
-    let recorded = std::fs::read_to_string(status_dir.join("exit-code"))
-        .ok()
-        .and_then(|s| s.trim().parse::<u8>().ok());
-    if recorded.is_none() {
-        eprintln!(
-            "vcan-setup: the VM exited ({status}) without running the command{}",
-            if kvm { " (with KVM)" } else { "" }
-        );
-    }
-    Ok(recorded)
 }
 
 /// Boot the VM, run the command inside, and return its exit code.

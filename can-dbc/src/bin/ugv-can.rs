@@ -12,14 +12,15 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
-use golf_car_can::candump::{Compact, parse_line};
+use golf_car_can::candump::{Compact, TextFrame, parse_line};
 use golf_car_can::e2e::{E2eRx, protect};
-use golf_car_can::{NETWORK, NetworkSpec, SignalSpec};
+use golf_car_can::{E2eError, MessageSpec, NETWORK, NetworkSpec, Payload, SignalSpec};
 
 #[derive(Parser, Debug)]
 #[command(
     name = "ugv-can",
-    version,
+    // `ugv-can 0.1.0 (golf-car-can)`: the binary, its crate's version and name.
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("CARGO_PKG_NAME"), ")"),
     about = "Decode and encode golf car CAN frames (golf_car.dbc)"
 )]
 struct Cli {
@@ -179,20 +180,16 @@ fn read_line(
     Ok(Some(length))
 }
 
+/// Decode candump lines from `input` (stdin when absent or `-`), one frame a line of
+/// text or JSON on stdout, checking E2E per interface when `e2e`; a summary on stderr.
+/// Fails (exit 1) when any line was malformed.
 fn decode(
     network: &NetworkSpec,
     input: Option<PathBuf>,
     json: bool,
     e2e: bool,
 ) -> Result<ExitCode> {
-    let reader: Box<dyn BufRead> = match input.as_deref() {
-        None => Box::new(BufReader::new(std::io::stdin())),
-        Some(p) if p.as_os_str() == "-" => Box::new(BufReader::new(std::io::stdin())),
-        Some(p) => Box::new(BufReader::new(
-            std::fs::File::open(p).with_context(|| format!("opening {}", p.display()))?,
-        )),
-    };
-    let mut reader = reader;
+    let mut reader = open_input(input)?;
     let mut out = std::io::stdout().lock();
     let mut receivers: BTreeMap<String, E2eRx<'_>> = BTreeMap::new();
     let (mut frames, mut malformed) = (0u64, 0u64);
@@ -206,37 +203,13 @@ fn decode(
             None => break,
             Some(length) => length,
         };
-        if length > MAX_LINE as u64 {
-            malformed += 1;
-            eprintln!(
-                "ugv-can: line {n}: {length} bytes, longer than a candump line can be ({MAX_LINE}), skipped: {}",
-                quoted(&String::from_utf8_lossy(&bytes))
-            );
-            continue;
-        }
-        let line = match std::str::from_utf8(&bytes) {
-            Ok(line) => line,
-            Err(e) => {
+        let frame = match frame_of_line(n, length, &bytes) {
+            Line::Blank => continue,
+            Line::Malformed => {
                 malformed += 1;
-                eprintln!(
-                    "ugv-can: line {n}: not UTF-8 text (byte {:#04x} at offset {}), skipped: {}",
-                    bytes.get(e.valid_up_to()).copied().unwrap_or_default(),
-                    e.valid_up_to(),
-                    quoted(&String::from_utf8_lossy(&bytes))
-                );
                 continue;
             }
-        };
-        if line.trim().is_empty() {
-            continue;
-        }
-        let frame = match parse_line(line) {
-            Ok(f) => f,
-            Err(e) => {
-                malformed += 1;
-                eprintln!("ugv-can: line {n}: {e}: {}", quoted(line));
-                continue;
-            }
+            Line::Frame(frame) => frame,
         };
         frames += 1;
         let iface = frame.interface.clone().unwrap_or_default();
@@ -251,87 +224,183 @@ fn decode(
             .flatten()
             .and_then(|id| network.message(id));
         let payload = message.and_then(|_| golf_car_can::codec::payload("", &frame.data).ok());
+        let decoded = Decoded {
+            frame: &frame,
+            iface: &iface,
+            message,
+            payload,
+            e2e: e2e_result.as_ref().map(|r| r.as_ref().map(|_| ())),
+        };
         if json {
-            let mut obj = serde_json::Map::new();
-            if let Some(ts) = &frame.timestamp {
-                obj.insert("timestamp".into(), ts.clone().into());
-            }
-            if !iface.is_empty() {
-                obj.insert("interface".into(), iface.clone().into());
-            }
-            obj.insert("id".into(), frame.id.into());
-            obj.insert("extended".into(), frame.extended.into());
-            if let Some(m) = message {
-                obj.insert("message".into(), m.name.to_string().into());
-            }
-            if let (Some(m), Some(p)) = (message, payload) {
-                let signals: serde_json::Map<String, serde_json::Value> = m
-                    .decode_all(&p)
-                    .into_iter()
-                    .map(|v| {
-                        (
-                            v.name.to_owned(),
-                            serde_json::to_value(&v).unwrap_or_default(),
-                        )
-                    })
-                    .collect();
-                obj.insert("signals".into(), signals.into());
-            } else {
-                let hex: String = frame.data.iter().map(|b| format!("{b:02X}")).collect();
-                obj.insert("data".into(), hex.into());
-            }
-            match &e2e_result {
-                Some(Ok(_)) => {
-                    obj.insert("e2e".into(), "ok".into());
-                }
-                Some(Err(e)) => {
-                    obj.insert("e2e".into(), e.to_string().into());
-                }
-                None => {}
-            }
-            writeln!(out, "{}", serde_json::Value::Object(obj))?;
+            writeln!(out, "{}", decoded.json())?;
         } else {
-            let mut text = String::new();
-            if let Some(ts) = &frame.timestamp {
-                text.push_str(&format!("({ts}) "));
-            }
-            if !iface.is_empty() {
-                text.push_str(&format!("{iface} "));
-            }
-            let compact = Compact {
-                id: frame.id,
-                extended: frame.extended,
-                data: &frame.data,
-            };
-            text.push_str(&compact.to_string());
-            match (message, payload) {
-                (Some(m), Some(p)) => {
-                    text.push_str(&format!(" {}", m.name));
-                    for (s, v) in m.signals.iter().zip(m.decode_all(&p)) {
-                        text.push_str(&format!(" {}={:.*}", v.name, decimals(s), v.value));
-                        if !v.unit.is_empty() {
-                            text.push_str(&format!(" {}", v.unit));
-                        }
-                        if let Some(label) = v.label {
-                            text.push_str(&format!(" ({label})"));
-                        }
-                    }
-                }
-                (Some(m), None) => text.push_str(&format!(" {}", m.name)),
-                (None, _) => text.push_str(" (not in the DBC)"),
-            }
-            match &e2e_result {
-                Some(Ok(_)) => text.push_str(" [e2e ok]"),
-                Some(Err(e)) => text.push_str(&format!(" [e2e REJECTED: {e}]")),
-                None => {}
-            }
-            writeln!(out, "{text}")?;
+            writeln!(out, "{}", decoded.text())?;
         }
     }
     out.flush()?;
+    summarise(&receivers, frames, malformed)?;
+    Ok(if malformed > 0 {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// The input to decode: the file, or stdin when absent or `-`.
+fn open_input(input: Option<PathBuf>) -> Result<Box<dyn BufRead>> {
+    Ok(match input.as_deref() {
+        None => Box::new(BufReader::new(std::io::stdin())),
+        Some(p) if p.as_os_str() == "-" => Box::new(BufReader::new(std::io::stdin())),
+        Some(p) => Box::new(BufReader::new(
+            std::fs::File::open(p).with_context(|| format!("opening {}", p.display()))?,
+        )),
+    })
+}
+
+/// What a line of the input holds.
+enum Line {
+    /// Nothing (blank or white space).
+    Blank,
+    /// Not a frame (too long, not UTF-8, not candump): reported on stderr.
+    Malformed,
+    Frame(TextFrame),
+}
+
+/// The frame on line `n` (`length` bytes in all, `bytes` of them kept); a malformed
+/// line is reported on stderr.
+fn frame_of_line(n: u64, length: u64, bytes: &[u8]) -> Line {
+    if length > MAX_LINE as u64 {
+        eprintln!(
+            "ugv-can: line {n}: {length} bytes, longer than a candump line can be ({MAX_LINE}), skipped: {}",
+            quoted(&String::from_utf8_lossy(bytes))
+        );
+        return Line::Malformed;
+    }
+    let line = match std::str::from_utf8(bytes) {
+        Ok(line) => line,
+        Err(e) => {
+            eprintln!(
+                "ugv-can: line {n}: not UTF-8 text (byte {:#04x} at offset {}), skipped: {}",
+                bytes.get(e.valid_up_to()).copied().unwrap_or_default(),
+                e.valid_up_to(),
+                quoted(&String::from_utf8_lossy(bytes))
+            );
+            return Line::Malformed;
+        }
+    };
+    if line.trim().is_empty() {
+        return Line::Blank;
+    }
+    match parse_line(line) {
+        Ok(f) => Line::Frame(f),
+        Err(e) => {
+            eprintln!("ugv-can: line {n}: {e}: {}", quoted(line));
+            Line::Malformed
+        }
+    }
+}
+
+/// A frame as `decode` shows it: the frame, its interface (empty when not named), its
+/// message and payload when the DBC has it, and the E2E check when made.
+struct Decoded<'a> {
+    frame: &'a TextFrame,
+    iface: &'a str,
+    message: Option<&'a MessageSpec>,
+    payload: Option<Payload>,
+    e2e: Option<Result<(), &'a E2eError>>,
+}
+
+impl Decoded<'_> {
+    /// The frame as one JSON object.
+    fn json(&self) -> serde_json::Value {
+        let (frame, message) = (self.frame, self.message);
+        let mut obj = serde_json::Map::new();
+        if let Some(ts) = &frame.timestamp {
+            obj.insert("timestamp".into(), ts.clone().into());
+        }
+        if !self.iface.is_empty() {
+            obj.insert("interface".into(), self.iface.to_owned().into());
+        }
+        obj.insert("id".into(), frame.id.into());
+        obj.insert("extended".into(), frame.extended.into());
+        if let Some(m) = message {
+            obj.insert("message".into(), m.name.to_string().into());
+        }
+        if let (Some(m), Some(p)) = (message, self.payload) {
+            let signals: serde_json::Map<String, serde_json::Value> = m
+                .decode_all(&p)
+                .into_iter()
+                .map(|v| {
+                    (
+                        v.name.to_owned(),
+                        serde_json::to_value(&v).unwrap_or_default(),
+                    )
+                })
+                .collect();
+            obj.insert("signals".into(), signals.into());
+        } else {
+            let hex: String = frame.data.iter().map(|b| format!("{b:02X}")).collect();
+            obj.insert("data".into(), hex.into());
+        }
+        match &self.e2e {
+            Some(Ok(())) => {
+                obj.insert("e2e".into(), "ok".into());
+            }
+            Some(Err(e)) => {
+                obj.insert("e2e".into(), e.to_string().into());
+            }
+            None => {}
+        }
+        serde_json::Value::Object(obj)
+    }
+
+    /// The frame as one line of text: candump's compact form, then the message and its
+    /// signals, then the E2E check.
+    fn text(&self) -> String {
+        let frame = self.frame;
+        let mut text = String::new();
+        if let Some(ts) = &frame.timestamp {
+            text.push_str(&format!("({ts}) "));
+        }
+        if !self.iface.is_empty() {
+            text.push_str(&format!("{} ", self.iface));
+        }
+        let compact = Compact {
+            id: frame.id,
+            extended: frame.extended,
+            data: &frame.data,
+        };
+        text.push_str(&compact.to_string());
+        match (self.message, self.payload) {
+            (Some(m), Some(p)) => {
+                text.push_str(&format!(" {}", m.name));
+                for (s, v) in m.signals.iter().zip(m.decode_all(&p)) {
+                    text.push_str(&format!(" {}={:.*}", v.name, decimals(s), v.value));
+                    if !v.unit.is_empty() {
+                        text.push_str(&format!(" {}", v.unit));
+                    }
+                    if let Some(label) = v.label {
+                        text.push_str(&format!(" ({label})"));
+                    }
+                }
+            }
+            (Some(m), None) => text.push_str(&format!(" {}", m.name)),
+            (None, _) => text.push_str(" (not in the DBC)"),
+        }
+        match &self.e2e {
+            Some(Ok(())) => text.push_str(" [e2e ok]"),
+            Some(Err(e)) => text.push_str(&format!(" [e2e REJECTED: {e}]")),
+            None => {}
+        }
+        text
+    }
+}
+
+/// The totals on stderr, and each interface's E2E statistics.
+fn summarise(receivers: &BTreeMap<String, E2eRx<'_>>, frames: u64, malformed: u64) -> Result<()> {
     let rejected: u64 = receivers.values().map(|r| r.stats().rejected()).sum();
     eprintln!("ugv-can: {frames} frames, {rejected} rejected by E2E, {malformed} malformed lines");
-    for (iface, rx) in &receivers {
+    for (iface, rx) in receivers {
         let name = if iface.is_empty() {
             "(no interface)"
         } else {
@@ -339,11 +408,7 @@ fn decode(
         };
         eprintln!("ugv-can: {name}: {}", serde_json::to_string(&rx.stats())?);
     }
-    Ok(if malformed > 0 {
-        ExitCode::FAILURE
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(())
 }
 
 fn encode(network: &NetworkSpec, key: &str, pairs: &[String], counter: u8) -> Result<String> {

@@ -26,7 +26,11 @@ use firmware_bridge::gateway::{DirectionStats, Gateway, GatewayConfig, GatewaySt
 /// and one of its receivers on the other side. Bytes cross verbatim (E2E is checked
 /// by the endpoints).
 #[derive(Debug, Parser)]
-#[command(version)]
+// `ugv-sick 0.1.0 (firmware-bridge)`: the binary's own name, its crate's version and name.
+#[command(
+    name = env!("CARGO_BIN_NAME"),
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("CARGO_PKG_NAME"), ")")
+)]
 struct Args {
     /// The simulator's interface.
     #[arg(long, value_name = "IFACE", default_value = "vcan0")]

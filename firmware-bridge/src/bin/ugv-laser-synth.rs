@@ -22,7 +22,11 @@ use firmware_bridge::laser::{LaserFrame, LaserPublisher};
 
 /// Publish synthetic laser frames on an iceoryx2 service, as stdin asks.
 #[derive(Debug, Parser)]
-#[command(version)]
+// `ugv-sick 0.1.0 (firmware-bridge)`: the binary's own name, its crate's version and name.
+#[command(
+    name = env!("CARGO_BIN_NAME"),
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("CARGO_PKG_NAME"), ")")
+)]
 struct Args {
     /// The service, `ugv-hil/<run_id>/laser`.
     service: String,

@@ -17,7 +17,7 @@
 //! status 0. Errors name the scanner's address or the service.
 
 use std::process::ExitCode;
-use std::sync::mpsc::channel;
+use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -29,7 +29,11 @@ use firmware_bridge::laser::LaserPublisher;
 
 /// Publish a SICK scanner's scans (CoLa-A over TCP) on an iceoryx2 laser service.
 #[derive(Debug, Parser)]
-#[command(version)]
+// `ugv-sick 0.1.0 (firmware-bridge)`: the binary's own name, its crate's version and name.
+#[command(
+    name = env!("CARGO_BIN_NAME"),
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("CARGO_PKG_NAME"), ")")
+)]
 struct Args {
     /// The scanner, `host:port` (SICK's CoLa-A port is 2111).
     #[arg(long, value_name = "HOST:PORT")]
@@ -72,32 +76,7 @@ struct Args {
 }
 
 fn run(args: &Args) -> anyhow::Result<()> {
-    if !(args.range_min.is_finite()
-        && args.range_max.is_finite()
-        && args.range_min >= 0.0
-        && args.range_min < args.range_max)
-    {
-        bail!(
-            "--range-min {} --range-max {}: need 0 <= range-min < range-max, in metres",
-            args.range_min,
-            args.range_max
-        );
-    }
-    let timeout = args.connect_timeout;
-    let config = ClientConfig {
-        connect_timeout: timeout,
-        reply_timeout: timeout,
-        login: !args.no_login,
-        start_measurement: args.start_measurement,
-        decode: DecodeOptions {
-            range_min: args.range_min,
-            range_max: args.range_max,
-            ..DecodeOptions::default()
-        },
-        host_stamps: args.host_stamps,
-        ..ClientConfig::default()
-    };
-
+    let config = client_config(args)?;
     let (stop_tx, stop) = channel();
     ctrlc::set_handler(move || {
         let _ = stop_tx.send(());
@@ -108,19 +87,8 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let publisher = LaserPublisher::new(&args.service)
         .with_context(|| format!("opening the laser service {}", args.service))?;
 
-    let scanner = || format!("scanner at {}", args.address);
-    let connect = || ColaClient::connect(&args.address, config.clone());
-    let mut client = if args.no_reconnect {
-        connect().with_context(scanner)?
-    } else {
-        let mut connected = None;
-        let attempt = || connect().map(|c| connected = Some(c));
-        if !retry(&stop, attempt, |e| {
-            tracing::warn!("{}: {e}; retrying in 1 s", scanner())
-        }) {
-            return Ok(());
-        }
-        connected.with_context(|| format!("{}: not connected", scanner()))?
+    let Some(mut client) = connect(args, &config, &stop)? else {
+        return Ok(());
     };
     tracing::info!(
         address = %args.address,
@@ -136,9 +104,92 @@ fn run(args: &Args) -> anyhow::Result<()> {
         frame_timeout: args.frame_timeout,
         count: args.count,
     };
-    // Published scans at the start of the report window.
-    let mut window = (Instant::now(), 0u64);
-    let watch = |event: &DriverEvent<'_>, stats: &DriverStats| {
+    let mut watcher = Watcher {
+        args,
+        window: (Instant::now(), 0),
+    };
+    let stats = drive(&mut client, &publisher, &driver, &stop, |event, stats| {
+        watcher.watch(event, stats)
+    })
+    .with_context(|| scanner(args))?;
+    tracing::info!(
+        published = stats.published,
+        lost = stats.client.lost_scans,
+        bad = stats.bad,
+        "stopped"
+    );
+    Ok(())
+}
+
+/// The scanner, as errors and warnings name it.
+fn scanner(args: &Args) -> String {
+    format!("scanner at {}", args.address)
+}
+
+/// The client's configuration from the arguments (the range limits checked).
+fn client_config(args: &Args) -> anyhow::Result<ClientConfig> {
+    if !(args.range_min.is_finite()
+        && args.range_max.is_finite()
+        && args.range_min >= 0.0
+        && args.range_min < args.range_max)
+    {
+        bail!(
+            "--range-min {} --range-max {}: need 0 <= range-min < range-max, in metres",
+            args.range_min,
+            args.range_max
+        );
+    }
+    let timeout = args.connect_timeout;
+    Ok(ClientConfig {
+        connect_timeout: timeout,
+        reply_timeout: timeout,
+        login: !args.no_login,
+        start_measurement: args.start_measurement,
+        decode: DecodeOptions {
+            range_min: args.range_min,
+            range_max: args.range_max,
+            ..DecodeOptions::default()
+        },
+        host_stamps: args.host_stamps,
+        ..ClientConfig::default()
+    })
+}
+
+/// Connect to the scanner: once with `--no-reconnect`, otherwise once a second until
+/// it answers; `None` when stopped first.
+fn connect(
+    args: &Args,
+    config: &ClientConfig,
+    stop: &Receiver<()>,
+) -> anyhow::Result<Option<ColaClient>> {
+    let connect = || ColaClient::connect(&args.address, config.clone());
+    if args.no_reconnect {
+        return Ok(Some(connect().with_context(|| scanner(args))?));
+    }
+    let mut connected = None;
+    let attempt = || connect().map(|c| connected = Some(c));
+    if !retry(stop, attempt, |e| {
+        tracing::warn!("{}: {e}; retrying in 1 s", scanner(args))
+    }) {
+        return Ok(None);
+    }
+    Ok(Some(connected.with_context(|| {
+        format!("{}: not connected", scanner(args))
+    })?))
+}
+
+/// What the driver's events make known: warnings (publish errors and bad telegrams
+/// the first ten times and at every power of two), and the scans/s line every
+/// `--report-interval`.
+struct Watcher<'a> {
+    args: &'a Args,
+    /// Published scans at the start of the report window.
+    window: (Instant, u64),
+}
+
+impl Watcher<'_> {
+    fn watch(&mut self, event: &DriverEvent<'_>, stats: &DriverStats) {
+        let args = self.args;
         match event {
             DriverEvent::PublishFailed { sequence, error } => {
                 let n = stats.publish_errors;
@@ -160,36 +211,33 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 // One bad telegram: say why; the loop goes on with the next.
                 let n = stats.bad;
                 if n <= 10 || n.is_power_of_two() {
-                    tracing::warn!("{}: bad scan ({n} so far): {e}", scanner());
+                    tracing::warn!("{}: bad scan ({n} so far): {e}", scanner(args));
                 }
             }
             DriverEvent::Lost(e) => tracing::warn!("{e}; reconnecting"),
             DriverEvent::ReconnectFailed(e) => {
-                tracing::warn!("{}: {e}; retrying in 1 s", scanner());
+                tracing::warn!("{}: {e}; retrying in 1 s", scanner(args));
             }
             DriverEvent::Published { .. } | DriverEvent::Idle | DriverEvent::Reconnected => {}
         }
-        let elapsed = window.0.elapsed();
-        if elapsed >= args.report_interval {
+        self.report(stats);
+    }
+
+    /// The scans/s line, when the report window is over.
+    fn report(&mut self, stats: &DriverStats) {
+        let elapsed = self.window.0.elapsed();
+        if elapsed >= self.args.report_interval {
             tracing::info!(
                 "{:.1} scans/s, {} published, {} lost by the scanner or network, {} bad telegrams, {} publish errors",
-                (stats.published - window.1) as f64 / elapsed.as_secs_f64(),
+                (stats.published - self.window.1) as f64 / elapsed.as_secs_f64(),
                 stats.published,
                 stats.client.lost_scans,
                 stats.bad,
                 stats.publish_errors,
             );
-            window = (Instant::now(), stats.published);
+            self.window = (Instant::now(), stats.published);
         }
-    };
-    let stats = drive(&mut client, &publisher, &driver, &stop, watch).with_context(scanner)?;
-    tracing::info!(
-        published = stats.published,
-        lost = stats.client.lost_scans,
-        bad = stats.bad,
-        "stopped"
-    );
-    Ok(())
+    }
 }
 
 fn main() -> ExitCode {

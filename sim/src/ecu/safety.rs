@@ -35,6 +35,21 @@ impl Cause {
     }
 }
 
+/// Why an ECU did not enable when a command asked it to (Enable = 1 while disabled):
+/// what the verdict names when a car stood (docs/wire-contract.md, "Enabling the ECUs").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct EnableRefusals {
+    /// Whether the ECU was ever enabled.
+    pub ever_enabled: bool,
+    /// Enable 0 -> 1 edges refused: no heartbeat with State = auto within its timeout.
+    pub no_auto_heartbeat: u64,
+    /// Enable 0 -> 1 edges refused: a fault was latched.
+    pub fault_latched: u64,
+    /// Commands with Enable = 1 to the disabled ECU that were no 0 -> 1 edge (the
+    /// enable bit held at 1 since an earlier command).
+    pub without_edge: u64,
+}
+
 /// Timing of the watchdog, seconds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SafetyTiming {
@@ -60,6 +75,8 @@ pub struct Safety {
     actuator: Option<crate::faults::EcuFaultCode>,
     /// Times the safe state was entered, by cause order above.
     pub trips: [u64; 6],
+    /// Commands that asked for an enable the ECU refused, by reason.
+    pub refusals: EnableRefusals,
 }
 
 impl Safety {
@@ -75,6 +92,7 @@ impl Safety {
             latched: None,
             actuator: None,
             trips: [0; 6],
+            refusals: EnableRefusals::default(),
         }
     }
 
@@ -88,6 +106,14 @@ impl Safety {
             self.enabled = false;
         } else if edge && self.latched.is_none() && self.heartbeat_auto(now) {
             self.enabled = true;
+            self.refusals.ever_enabled = true;
+        } else if !self.enabled {
+            let r = &mut self.refusals;
+            match (edge, self.latched.is_some()) {
+                (false, _) => r.without_edge += 1,
+                (true, true) => r.fault_latched += 1,
+                (true, false) => r.no_auto_heartbeat += 1,
+            }
         }
     }
 
@@ -244,6 +270,34 @@ mod tests {
         s.on_heartbeat(0.04, Idle);
         assert!(!s.enabled(), "leaving auto disables");
         assert_eq!(s.fault(), None);
+    }
+
+    #[test]
+    fn enable_from_the_first_frame_before_an_auto_heartbeat_is_refused_and_counted() {
+        let mut s = Safety::new(timing());
+        // The mistake: Enable = 1 from the first command, the heartbeat auto after it.
+        s.on_command(0.0, true);
+        let mut t = 0.01;
+        while t < 0.5 {
+            s.on_heartbeat(t, Auto);
+            s.on_command(t, true);
+            t += 0.01;
+        }
+        assert!(!s.enabled());
+        assert_eq!(s.fault(), None, "disabled without a fault");
+        let r = s.refusals;
+        assert!(!r.ever_enabled);
+        assert_eq!(r.no_auto_heartbeat, 1, "{r:?}");
+        assert!(r.without_edge >= 45, "{r:?}");
+        // Done right: a 0, then the edge.
+        s.on_command(0.5, false);
+        s.on_command(0.51, true);
+        assert!(s.enabled() && s.refusals.ever_enabled);
+        // An edge while a fault is latched is counted as such.
+        s.on_heartbeat(0.52, Estop);
+        s.on_command(0.53, false);
+        s.on_command(0.54, true);
+        assert_eq!(s.refusals.fault_latched, 1, "{:?}", s.refusals);
     }
 
     #[test]

@@ -30,6 +30,9 @@ pub struct NodeStats {
     /// fault report, second sender, its own hardware fault (the simulated ECU's; zero
     /// for a physical one).
     pub safe_state_trips: [u64; 6],
+    /// Enables the simulated ECU refused, by reason, and whether it ever enabled
+    /// (all zero for a physical one).
+    pub enable: crate::ecu::safety::EnableRefusals,
     /// Reports received from the physical ECU (absent when the ECU is simulated).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub physical_reports: Option<u64>,
@@ -342,6 +345,10 @@ impl<B: Can + QueueDrops> Station<B> {
             safe_state_trips: match &self.twin {
                 Twin::Simulated(node) => node.safety_ref().trips,
                 Twin::Physical(_) => [0; 6],
+            },
+            enable: match &self.twin {
+                Twin::Simulated(node) => node.safety_ref().refusals,
+                Twin::Physical(_) => Default::default(),
             },
             physical_reports: match &self.twin {
                 Twin::Simulated(_) => None,

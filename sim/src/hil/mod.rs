@@ -383,71 +383,13 @@ pub fn run_scenario(
     } = endpoints;
     let iface = sc.can.interface.clone();
     let mut sim = Sim::new(sc.clone(), steering, throttle).with_sensors()?;
-    let mut recording = match tap {
-        Some(tap) => {
-            let toml = toml::to_string_pretty(config).unwrap_or_default();
-            let info = run_info(RecordMode::Hil, sc, toml);
-            let outputs = Outputs {
-                dir: options.record.then_some(options.results.as_path()),
-                live: options.live.as_deref(),
-            };
-            Some(Recording::new(Recorder::create(outputs, sc, info)?, tap))
-        }
-        None => None,
-    };
-    let m = &wires.map;
-    log(&format!(
-        "wires: GPS {} ({}, {} baud), laser iceoryx2 service {:?} ({}), CAN {} (golf_car.dbc); controller {}",
-        m.gps_link.display(),
-        m.gps_line,
-        m.gps_baud,
-        m.laser_service,
-        m.laser,
-        m.can,
-        m.controller,
-    ));
-    for (physical, nodes) in &m.gateways {
-        log(&format!(
-            "gateway {iface} <-> {physical}: physical {}",
-            nodes.join(", ")
-        ));
-    }
-    let write = |name: &str, text: String| {
-        let path = options.results.join(name);
-        std::fs::write(&path, text).map_err(|source| {
-            HilError::Results(crate::verdict::ResultsError::Write {
-                path: path.display().to_string(),
-                source,
-            })
-        })
-    };
-    write(
-        "wires.json",
-        serde_json::to_string_pretty(&wires.map).unwrap_or_default(),
-    )?;
-    // The controller's configuration: given to the binary started here, and left for
-    // a controller started by the user or flashed to a board.
-    let config_path = options.results.join("controller.toml");
-    write("controller.toml", toml::to_string_pretty(config)?)?;
-    let trace_path = options.results.join("controller-trace.jsonl");
-    let _ = std::fs::remove_file(&trace_path);
+    let mut recording = open_recording(tap, sc, config, options)?;
+    log_wires(&wires.map, &iface, log);
+    let (config_path, trace_path) = write_run_files(options, &wires.map, config)?;
     let mut controller =
         start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
-    let board = matches!(sc.devices.controller, ControllerSite::Board { .. });
-    if controller.is_none() && (options.wait_for_controller || board) {
-        log(&format!(
-            "waiting for a controller heartbeat on {iface} (configuration for it: {})",
-            config_path.display()
-        ));
-        if !wait_for_controller(&iface, Duration::from_secs(60), stop)? {
-            let outcome = Outcome::Stopped {
-                time: 0.0,
-                reason: "stopped by signal".to_owned(),
-            };
-            let verdict =
-                crate::verdict::Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), None);
-            return Ok((verdict, outcome));
-        }
+    if controller.is_none() && !await_controller(sc, options, &iface, &config_path, stop, log)? {
+        return Ok(stopped_before_start(sc, &sim));
     }
     log(&format!(
         "physics {} Hz, time limit {} s",
@@ -470,33 +412,12 @@ pub fn run_scenario(
         log(&crate::record::describe(&summary));
     }
     // Whatever happened, the controller is asked to finish and its trace collected.
-    let trace = controller.as_mut().and_then(|c| {
-        let exit = c.finish(Duration::from_secs(5));
-        log(&format!("controller finished: {exit:?}"));
-        // Written while the controller ran: there even when it was killed.
-        std::fs::read_to_string(&c.trace)
-            .ok()
-            .and_then(|t| match Trace::from_jsonl(&t) {
-                Ok(trace) => Some(trace),
-                Err(e) => {
-                    log(&format!(
-                        "the controller's trace {}: {e}",
-                        c.trace.display()
-                    ));
-                    None
-                }
-            })
-    });
+    let trace = controller.as_mut().and_then(|c| finish_controller(c, log));
     let (outcome, started_ns) = run?;
     if let Some(p) = &pacer {
         sim.bus_arbitrated(p.stats());
     }
-    let (lines, last) = wires.gps_input();
-    if lines > 0 {
-        log(&format!(
-            "the controller wrote {lines} lines to the GPS port (last: {last:?})"
-        ));
-    }
+    log_gps_input(&wires, log);
     let measured = |verdict: &mut crate::verdict::Verdict| {
         verdict.fix_latency = trace
             .as_ref()
@@ -518,4 +439,144 @@ pub fn run_scenario(
         measured,
     )?;
     Ok((verdict, outcome))
+}
+
+/// The verdict of a run stopped by signal while it waited for its controller.
+fn stopped_before_start(
+    sc: &Scenario,
+    sim: &Sim<TimedSocket>,
+) -> (crate::verdict::Verdict, Outcome) {
+    let outcome = Outcome::Stopped {
+        time: 0.0,
+        reason: "stopped by signal".to_owned(),
+    };
+    let verdict = crate::verdict::Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), None);
+    (verdict, outcome)
+}
+
+/// What the controller wrote to the GPS port, if anything.
+fn log_gps_input(wires: &Wires, log: &mut dyn FnMut(&str)) {
+    let (lines, last) = wires.gps_input();
+    if lines > 0 {
+        log(&format!(
+            "the controller wrote {lines} lines to the GPS port (last: {last:?})"
+        ));
+    }
+}
+
+/// The run's recording on the recorder's tap (none without one): into the results
+/// when `--record`, onto the live view when there is one.
+fn open_recording(
+    tap: Option<SocketTap>,
+    sc: &Scenario,
+    config: &ControllerConfig,
+    options: &HilOptions,
+) -> Result<Option<Recording<SocketTap>>, HilError> {
+    let Some(tap) = tap else {
+        return Ok(None);
+    };
+    let toml = toml::to_string_pretty(config).unwrap_or_default();
+    let info = run_info(RecordMode::Hil, sc, toml);
+    let outputs = Outputs {
+        dir: options.record.then_some(options.results.as_path()),
+        live: options.live.as_deref(),
+    };
+    Ok(Some(Recording::new(
+        Recorder::create(outputs, sc, info)?,
+        tap,
+    )))
+}
+
+/// A line for the wires, and one for each gateway to a physical bus.
+fn log_wires(m: &WireMap, iface: &str, log: &mut dyn FnMut(&str)) {
+    log(&format!(
+        "wires: GPS {} ({}, {} baud), laser iceoryx2 service {:?} ({}), CAN {} (golf_car.dbc); controller {}",
+        m.gps_link.display(),
+        m.gps_line,
+        m.gps_baud,
+        m.laser_service,
+        m.laser,
+        m.can,
+        m.controller,
+    ));
+    for (physical, nodes) in &m.gateways {
+        log(&format!(
+            "gateway {iface} <-> {physical}: physical {}",
+            nodes.join(", ")
+        ));
+    }
+}
+
+/// Write `wires.json` and `controller.toml` into the results and clear the last
+/// run's controller trace; returns the configuration's and the trace's paths.
+fn write_run_files(
+    options: &HilOptions,
+    map: &WireMap,
+    config: &ControllerConfig,
+) -> Result<(PathBuf, PathBuf), HilError> {
+    let write = |name: &str, text: String| {
+        let path = options.results.join(name);
+        std::fs::write(&path, text).map_err(|source| {
+            HilError::Results(crate::verdict::ResultsError::Write {
+                path: path.display().to_string(),
+                source,
+            })
+        })
+    };
+    write(
+        "wires.json",
+        serde_json::to_string_pretty(map).unwrap_or_default(),
+    )?;
+    // The controller's configuration: given to the binary started here, and left for
+    // a controller started by the user or flashed to a board.
+    // The mission for a controller of one's own (docs/wire-contract.md); controller.toml
+    // is written last, so a reader that waits for it finds the other two whole.
+    let mission = crate::mission::mission_file(config);
+    write("mission.toml", toml::to_string_pretty(&mission)?)?;
+    let config_path = options.results.join("controller.toml");
+    write("controller.toml", toml::to_string_pretty(config)?)?;
+    let trace_path = options.results.join("controller-trace.jsonl");
+    let _ = std::fs::remove_file(&trace_path);
+    Ok((config_path, trace_path))
+}
+
+/// With no controller started here: when asked to (`--wait-for-controller`) or when
+/// the controller is on a board, wait up to 60 s for its heartbeat. False when the
+/// run was stopped first.
+fn await_controller(
+    sc: &Scenario,
+    options: &HilOptions,
+    iface: &str,
+    config_path: &std::path::Path,
+    stop: &AtomicBool,
+    log: &mut dyn FnMut(&str),
+) -> Result<bool, HilError> {
+    let board = matches!(sc.devices.controller, ControllerSite::Board { .. });
+    if !(options.wait_for_controller || board) {
+        return Ok(true);
+    }
+    log(&format!(
+        "waiting for a controller heartbeat on {iface} (configuration for it: {})",
+        config_path.display()
+    ));
+    wait_for_controller(iface, Duration::from_secs(60), stop)
+}
+
+/// Ask the controller started here to finish, and read the trace it wrote while it
+/// ran (there even when it was killed).
+fn finish_controller(c: &mut ControllerProcess, log: &mut dyn FnMut(&str)) -> Option<Trace> {
+    let exit = c.finish(Duration::from_secs(5));
+    log(&format!("controller finished: {exit:?}"));
+    std::fs::read_to_string(&c.trace)
+        .ok()
+        .and_then(|t| match Trace::from_jsonl(&t) {
+            Ok(trace) => Some(trace),
+            Err(e) => {
+                log(&format!(
+                    "the controller's trace {}: {e}",
+                    c.trace.display()
+                ));
+                None
+            }
+        })
 }

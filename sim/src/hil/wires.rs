@@ -17,9 +17,15 @@ use crate::devices::map::{ControllerSite, GpsOutput, LaserSource};
 use crate::measure::{GpsLineStats, WireStats};
 use crate::scenario::Scenario;
 
-/// Where the wires are, for the user and for the controller.
+/// The version of `wires.json`'s layout ([`WireMap`], its first key): raised when a key
+/// changes meaning or goes away (docs/wire-contract.md, "Finding the wires").
+pub const WIRES_VERSION: u32 = 1;
+
+/// Where the wires are, for the user and for the controller (`wires.json`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct WireMap {
+    /// [`WIRES_VERSION`].
+    pub version: u32,
     /// What the controller opens as its GPS: the pty's link, or the serial device.
     pub gps_link: PathBuf,
     pub gps_baud: u32,
@@ -72,6 +78,121 @@ pub fn gateway_log(physical: &str) -> String {
     format!("gateway-{physical}.log")
 }
 
+/// The laser's end of the wires: where the simulated scans go, the CoLa-A driver
+/// that puts a device's scans on the service (when there is one), and how the map
+/// names it.
+struct OpenLaser {
+    out: LaserOut,
+    driver: Option<ColaDriverThread>,
+    text: String,
+}
+
+impl OpenLaser {
+    /// The laser of the scenario's device map on `service`: the service itself, a
+    /// CoLa-A server (with a driver, when the map asks), or a driver of the physical
+    /// scanner.
+    fn open(sc: &Scenario, service: &str) -> Result<OpenLaser, HilError> {
+        Ok(match &sc.devices.laser {
+            LaserSource::Iceoryx2 {} => OpenLaser {
+                out: LaserOut::Iceoryx2(
+                    LaserPublisher::new(service)
+                        .map(Box::new)
+                        .map_err(|e| laser_err(service, e.to_string()))?,
+                ),
+                driver: None,
+                text: "iceoryx2".to_owned(),
+            },
+            LaserSource::Cola { listen, driver } => Self::cola(sc, service, *listen, *driver)?,
+            LaserSource::Physical { address } => OpenLaser {
+                out: LaserOut::Off,
+                driver: Some(
+                    ColaDriverThread::spawn(*address, service, DecodeOptions::default()).map_err(
+                        |e| laser_err(service, format!("CoLa-A driver to {address}: {e}")),
+                    )?,
+                ),
+                text: format!("physical {address}"),
+            },
+        })
+    }
+
+    /// The simulated scanner served as a CoLa-A device on `listen`, and with
+    /// `driver` a driver that puts its scans on `service`.
+    fn cola(
+        sc: &Scenario,
+        service: &str,
+        listen: std::net::SocketAddr,
+        driver: bool,
+    ) -> Result<OpenLaser, HilError> {
+        let spec = sc.laser.spec();
+        let device = match sc.laser.profile {
+            LaserProfile::Lms111 => "LMS111",
+            LaserProfile::Lms291 => "LMS291",
+        };
+        let server = ColaServer::bind(
+            listen,
+            ServerConfig {
+                device_name: device.to_owned(),
+                ..ServerConfig::lms111()
+            },
+        )
+        .map_err(|e| laser_err(service, format!("serving CoLa-A on {listen}: {e}")))?;
+        let addr = server.local_addr();
+        let driver = if driver {
+            let decode = DecodeOptions {
+                range_min: spec.range_min as f32,
+                range_max: spec.range_max as f32,
+                ..DecodeOptions::default()
+            };
+            Some(
+                ColaDriverThread::spawn(addr, service, decode)
+                    .map_err(|e| laser_err(service, format!("CoLa-A driver to {addr}: {e}")))?,
+            )
+        } else {
+            None
+        };
+        Ok(OpenLaser {
+            out: LaserOut::Cola(server),
+            driver,
+            text: format!("cola {addr}"),
+        })
+    }
+}
+
+/// An error of the laser service `service`.
+fn laser_err(service: &str, message: String) -> HilError {
+    HilError::Laser {
+        service: service.to_owned(),
+        message,
+    }
+}
+
+/// A gateway from the simulator's bus to each physical bus, logging into
+/// `gateway_logs` when given, its threads at `rt_priority`.
+fn open_gateways(
+    sc: &Scenario,
+    buses: &[(String, Vec<&'static str>)],
+    gateway_logs: Option<&Path>,
+    rt_priority: u8,
+) -> Result<Vec<GatewayHandle>, HilError> {
+    let mut gateways = Vec::new();
+    for (physical, nodes) in buses {
+        let config = GatewayConfig {
+            sim_iface: sc.can.interface.clone(),
+            physical_iface: physical.clone(),
+            physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
+            log: gateway_logs.map(|dir| dir.join(gateway_log(physical))),
+            rt_priority,
+            ..GatewayConfig::default()
+        };
+        gateways.push(Gateway::spawn(config).map_err(|source| HilError::Gateway {
+            sim: sc.can.interface.clone(),
+            physical: physical.clone(),
+            source,
+        })?);
+    }
+    Ok(gateways)
+}
+
 impl Wires {
     /// Open the wires of the scenario's device map: the GPS pty behind `gps_link` (or
     /// the serial device), the laser service of `run_id` (directly, or behind a CoLa-A
@@ -97,78 +218,12 @@ impl Wires {
             ),
         };
         let service = service_name(run_id);
-        let laser_err = |message: String| HilError::Laser {
-            service: service.clone(),
-            message,
-        };
-        let (laser, driver, laser_text) = match &devices.laser {
-            LaserSource::Iceoryx2 {} => (
-                LaserOut::Iceoryx2(
-                    LaserPublisher::new(&service)
-                        .map(Box::new)
-                        .map_err(|e| laser_err(e.to_string()))?,
-                ),
-                None,
-                "iceoryx2".to_owned(),
-            ),
-            LaserSource::Cola { listen, driver } => {
-                let spec = sc.laser.spec();
-                let device = match sc.laser.profile {
-                    LaserProfile::Lms111 => "LMS111",
-                    LaserProfile::Lms291 => "LMS291",
-                };
-                let server = ColaServer::bind(
-                    *listen,
-                    ServerConfig {
-                        device_name: device.to_owned(),
-                        ..ServerConfig::lms111()
-                    },
-                )
-                .map_err(|e| laser_err(format!("serving CoLa-A on {listen}: {e}")))?;
-                let addr = server.local_addr();
-                let driver = if *driver {
-                    let decode = DecodeOptions {
-                        range_min: spec.range_min as f32,
-                        range_max: spec.range_max as f32,
-                        ..DecodeOptions::default()
-                    };
-                    Some(
-                        ColaDriverThread::spawn(addr, &service, decode)
-                            .map_err(|e| laser_err(format!("CoLa-A driver to {addr}: {e}")))?,
-                    )
-                } else {
-                    None
-                };
-                (LaserOut::Cola(server), driver, format!("cola {addr}"))
-            }
-            LaserSource::Physical { address } => (
-                LaserOut::Off,
-                Some(
-                    ColaDriverThread::spawn(*address, &service, DecodeOptions::default())
-                        .map_err(|e| laser_err(format!("CoLa-A driver to {address}: {e}")))?,
-                ),
-                format!("physical {address}"),
-            ),
-        };
+        let laser = OpenLaser::open(sc, &service)?;
         let buses = devices.physical_buses();
-        let mut gateways = Vec::new();
-        for (physical, nodes) in &buses {
-            let config = GatewayConfig {
-                sim_iface: sc.can.interface.clone(),
-                physical_iface: physical.clone(),
-                physical_nodes: nodes.iter().map(|n| (*n).to_owned()).collect(),
-                log: gateway_logs.map(|dir| dir.join(gateway_log(physical))),
-                rt_priority,
-                ..GatewayConfig::default()
-            };
-            gateways.push(Gateway::spawn(config).map_err(|source| HilError::Gateway {
-                sim: sc.can.interface.clone(),
-                physical: physical.clone(),
-                source,
-            })?);
-        }
+        let gateways = open_gateways(sc, &buses, gateway_logs, rt_priority)?;
         Ok(Wires {
             map: WireMap {
+                version: WIRES_VERSION,
                 gps_link: match &devices.gps {
                     GpsOutput::Serial {
                         peer: Some(peer), ..
@@ -181,7 +236,7 @@ impl Wires {
                 },
                 gps_line,
                 laser_service: service,
-                laser: laser_text,
+                laser: laser.text,
                 can: sc.can.interface.clone(),
                 gateways: buses,
                 controller: match &devices.controller {
@@ -190,8 +245,8 @@ impl Wires {
                 },
             },
             gps,
-            laser,
-            driver,
+            laser: laser.out,
+            driver: laser.driver,
             gateways,
             can_horizon,
         })
@@ -235,5 +290,53 @@ impl Wires {
             gateways: self.gateways.iter().map(GatewayHandle::stats).collect(),
             laser_driver: self.driver.as_ref().map(ColaDriverThread::stats),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wires_json_starts_with_its_version_and_has_the_documented_keys()
+    -> Result<(), serde_json::Error> {
+        let map = WireMap {
+            version: WIRES_VERSION,
+            gps_link: PathBuf::from("/tmp/ugv-hil-x-gps"),
+            gps_baud: 115_200,
+            gps_line: "pty",
+            laser_service: "ugv-hil/x/laser".to_owned(),
+            laser: "iceoryx2".to_owned(),
+            can: "vcan0".to_owned(),
+            gateways: vec![("can1".to_owned(), vec!["STEERING_ECU"])],
+            controller: "local".to_owned(),
+        };
+        let json = serde_json::to_string(&map)?;
+        assert!(json.starts_with("{\"version\":1,"), "{json}");
+        let value: serde_json::Value = serde_json::from_str(&json)?;
+        let mut keys: Vec<&str> = value
+            .as_object()
+            .map(|o| o.keys().map(String::as_str).collect())
+            .unwrap_or_default();
+        keys.sort_unstable();
+        // docs/wire-contract.md's table.
+        let mut documented = vec![
+            "version",
+            "gps_link",
+            "gps_baud",
+            "gps_line",
+            "laser_service",
+            "laser",
+            "can",
+            "gateways",
+            "controller",
+        ];
+        documented.sort_unstable();
+        assert_eq!(keys, documented);
+        assert_eq!(
+            value["gateways"],
+            serde_json::json!([["can1", ["STEERING_ECU"]]])
+        );
+        Ok(())
     }
 }
