@@ -264,78 +264,13 @@ fn attribute_u32(
     }
 }
 
+/// The network of a parsed DBC: its messages checked and converted, the message
+/// attributes applied, the database's bit rate (500 kbit/s when not given) and name.
 fn convert(dbc: &can_dbc::Dbc) -> Result<NetworkSpec, SpecError> {
     let mut messages: Vec<MessageSpec> = Vec::with_capacity(dbc.messages.len());
     for m in &dbc.messages {
-        let id = match m.id {
-            can_dbc::MessageId::Standard(id) if id > 0x7FF => {
-                return Err(SpecError::IdBeyond11Bits {
-                    message: m.name.clone(),
-                    id,
-                });
-            }
-            can_dbc::MessageId::Standard(id) => id,
-            can_dbc::MessageId::Extended(id) => {
-                return Err(SpecError::ExtendedId {
-                    message: m.name.clone(),
-                    id,
-                });
-            }
-        };
-        if let Some(first) = messages.iter().find(|x| x.id == id) {
-            return Err(SpecError::DuplicateId {
-                id,
-                first: first.name.to_string(),
-                second: m.name.clone(),
-            });
-        }
-        if m.size != FRAME_LEN as u64 {
-            return Err(SpecError::WrongSize {
-                message: m.name.clone(),
-                dlc: m.size,
-            });
-        }
-        let mut signals = Vec::with_capacity(m.signals.len());
-        for s in &m.signals {
-            signals.push(convert_signal(dbc, &m.name, m.id, s)?);
-        }
-        check_layout(&m.name, &signals)?;
-        let mut senders: Vec<Cow<'static, str>> = m
-            .transmitter
-            .iter()
-            .filter(|t| t.as_str() != "Vector__XXX")
-            .map(|t| owned(t))
-            .collect();
-        for tx in dbc
-            .message_transmitters
-            .iter()
-            .filter(|t| t.message_id == m.id)
-        {
-            for t in &tx.transmitter {
-                if !senders.iter().any(|s| s == t) {
-                    senders.push(owned(t));
-                }
-            }
-        }
-        let comment = dbc
-            .comments
-            .iter()
-            .find_map(|c| match c {
-                can_dbc::Comment::Message { id: cid, comment } if *cid == m.id => {
-                    Some(owned(comment))
-                }
-                _ => None,
-            })
-            .unwrap_or_default();
-        messages.push(MessageSpec {
-            id,
-            name: owned(&m.name),
-            senders: Cow::Owned(senders),
-            cycle_time_ms: None,
-            timeout_ms: None,
-            signals: Cow::Owned(signals),
-            comment,
-        });
+        let message = convert_message(dbc, m, &messages)?;
+        messages.push(message);
     }
     for tx in &dbc.message_transmitters {
         if !dbc.messages.iter().any(|m| m.id == tx.message_id) {
@@ -345,31 +280,7 @@ fn convert(dbc: &can_dbc::Dbc) -> Result<NetworkSpec, SpecError> {
             });
         }
     }
-    for attr in &dbc.attribute_values_message {
-        let slot = match attr.name.as_str() {
-            "GenMsgCycleTime" => 0,
-            "GenMsgTimeoutTime" => 1,
-            _ => continue,
-        };
-        let raw_id = attr.message_id.raw();
-        let value = attribute_u32(&attr.value, &attr.name, raw_id)?;
-        let message = messages
-            .iter_mut()
-            .find(|m| {
-                u32::from(m.id) == raw_id
-                    && matches!(attr.message_id, can_dbc::MessageId::Standard(_))
-            })
-            .ok_or(SpecError::UnknownMessage {
-                what: "a BA_ attribute",
-                id: raw_id,
-            })?;
-        let ms = (value > 0).then_some(value);
-        if slot == 0 {
-            message.cycle_time_ms = ms;
-        } else {
-            message.timeout_ms = ms;
-        }
-    }
+    apply_message_attributes(dbc, &mut messages)?;
     let baudrate = dbc
         .attribute_values_database
         .iter()
@@ -399,12 +310,174 @@ fn convert(dbc: &can_dbc::Dbc) -> Result<NetworkSpec, SpecError> {
     })
 }
 
+/// One message: an 11-bit ID that none of `earlier` has, eight bytes, its signals
+/// laid out without overlap, its senders and comment (cycle time and timeout come
+/// from the attributes later).
+fn convert_message(
+    dbc: &can_dbc::Dbc,
+    m: &can_dbc::Message,
+    earlier: &[MessageSpec],
+) -> Result<MessageSpec, SpecError> {
+    let id = standard_id(m)?;
+    if let Some(first) = earlier.iter().find(|x| x.id == id) {
+        return Err(SpecError::DuplicateId {
+            id,
+            first: first.name.to_string(),
+            second: m.name.clone(),
+        });
+    }
+    if m.size != FRAME_LEN as u64 {
+        return Err(SpecError::WrongSize {
+            message: m.name.clone(),
+            dlc: m.size,
+        });
+    }
+    let mut signals = Vec::with_capacity(m.signals.len());
+    for s in &m.signals {
+        signals.push(convert_signal(dbc, &m.name, m.id, s)?);
+    }
+    check_layout(&m.name, &signals)?;
+    let comment = dbc
+        .comments
+        .iter()
+        .find_map(|c| match c {
+            can_dbc::Comment::Message { id: cid, comment } if *cid == m.id => Some(owned(comment)),
+            _ => None,
+        })
+        .unwrap_or_default();
+    Ok(MessageSpec {
+        id,
+        name: owned(&m.name),
+        senders: Cow::Owned(senders(dbc, m)),
+        cycle_time_ms: None,
+        timeout_ms: None,
+        signals: Cow::Owned(signals),
+        comment,
+    })
+}
+
+/// A message's ID, which must be a standard (11-bit) one.
+fn standard_id(m: &can_dbc::Message) -> Result<u16, SpecError> {
+    match m.id {
+        can_dbc::MessageId::Standard(id) if id > 0x7FF => Err(SpecError::IdBeyond11Bits {
+            message: m.name.clone(),
+            id,
+        }),
+        can_dbc::MessageId::Standard(id) => Ok(id),
+        can_dbc::MessageId::Extended(id) => Err(SpecError::ExtendedId {
+            message: m.name.clone(),
+            id,
+        }),
+    }
+}
+
+/// A message's senders: its transmitter (unless `Vector__XXX`), then those of its
+/// `BO_TX_BU_` lines, each once.
+fn senders(dbc: &can_dbc::Dbc, m: &can_dbc::Message) -> Vec<Cow<'static, str>> {
+    let mut senders: Vec<Cow<'static, str>> = m
+        .transmitter
+        .iter()
+        .filter(|t| t.as_str() != "Vector__XXX")
+        .map(|t| owned(t))
+        .collect();
+    for tx in dbc
+        .message_transmitters
+        .iter()
+        .filter(|t| t.message_id == m.id)
+    {
+        for t in &tx.transmitter {
+            if !senders.iter().any(|s| s == t) {
+                senders.push(owned(t));
+            }
+        }
+    }
+    senders
+}
+
+/// The messages' cycle times and timeouts (`GenMsgCycleTime`, `GenMsgTimeoutTime`;
+/// 0 is none), each of a message the DBC defines.
+fn apply_message_attributes(
+    dbc: &can_dbc::Dbc,
+    messages: &mut [MessageSpec],
+) -> Result<(), SpecError> {
+    for attr in &dbc.attribute_values_message {
+        let slot = match attr.name.as_str() {
+            "GenMsgCycleTime" => 0,
+            "GenMsgTimeoutTime" => 1,
+            _ => continue,
+        };
+        let raw_id = attr.message_id.raw();
+        let value = attribute_u32(&attr.value, &attr.name, raw_id)?;
+        let message = messages
+            .iter_mut()
+            .find(|m| {
+                u32::from(m.id) == raw_id
+                    && matches!(attr.message_id, can_dbc::MessageId::Standard(_))
+            })
+            .ok_or(SpecError::UnknownMessage {
+                what: "a BA_ attribute",
+                id: raw_id,
+            })?;
+        let ms = (value > 0).then_some(value);
+        if slot == 0 {
+            message.cycle_time_ms = ms;
+        } else {
+            message.timeout_ms = ms;
+        }
+    }
+    Ok(())
+}
+
+/// One signal of `message`: plain (not multiplexed), its bits within the frame, a
+/// finite non-zero factor, a finite offset and range, with its value table and
+/// comment.
 fn convert_signal(
     dbc: &can_dbc::Dbc,
     message: &str,
     message_id: can_dbc::MessageId,
     s: &can_dbc::Signal,
 ) -> Result<SignalSpec, SpecError> {
+    let bad = |what: String| SpecError::BadSignal {
+        message: message.to_owned(),
+        signal: s.name.clone(),
+        what,
+    };
+    let (min, max) = check_signal(message, s)?;
+    let spec = SignalSpec {
+        name: owned(&s.name),
+        start_bit: s.start_bit as u16,
+        size: s.size as u8,
+        byte_order: match s.byte_order {
+            can_dbc::ByteOrder::LittleEndian => ByteOrder::Intel,
+            can_dbc::ByteOrder::BigEndian => ByteOrder::Motorola,
+        },
+        signed: matches!(s.value_type, can_dbc::ValueType::Signed),
+        factor: s.factor,
+        offset: s.offset,
+        min,
+        max,
+        unit: owned(&s.unit),
+        receivers: Cow::Owned(
+            s.receivers
+                .iter()
+                .filter(|r| r.as_str() != "Vector__XXX")
+                .map(|r| owned(r))
+                .collect(),
+        ),
+        values: Cow::Owned(value_table(dbc, message_id, &s.name)),
+        comment: signal_comment(dbc, message_id, &s.name),
+    };
+    if spec.bit_positions().iter().any(|&b| b >= 64) {
+        return Err(bad(format!(
+            "bits {}|{} run outside the 8-byte frame",
+            s.start_bit, s.size
+        )));
+    }
+    Ok(spec)
+}
+
+/// A signal's checks before it is converted; returns its range (min, max).
+fn check_signal(message: &str, s: &can_dbc::Signal) -> Result<(f64, f64), SpecError> {
     let bad = |what: String| SpecError::BadSignal {
         message: message.to_owned(),
         signal: s.name.clone(),
@@ -435,15 +508,19 @@ fn convert_signal(
     if !(min.is_finite() && max.is_finite() && min <= max) {
         return Err(bad(format!("range [{min}|{max}] is not a finite interval")));
     }
-    let values = dbc
-        .value_descriptions
+    Ok((min, max))
+}
+
+/// The value table (`VAL_`) of signal `name` of message `message_id`; empty when none.
+fn value_table(dbc: &can_dbc::Dbc, message_id: can_dbc::MessageId, name: &str) -> Vec<ValueLabel> {
+    dbc.value_descriptions
         .iter()
         .find_map(|v| match v {
             can_dbc::ValueDescription::Signal {
                 message_id: id,
-                name,
+                name: signal,
                 value_descriptions,
-            } if *id == message_id && *name == s.name => Some(value_descriptions),
+            } if *id == message_id && signal == name => Some(value_descriptions),
             _ => None,
         })
         .map(|list| {
@@ -454,50 +531,26 @@ fn convert_signal(
                 })
                 .collect::<Vec<_>>()
         })
-        .unwrap_or_default();
-    let comment = dbc
-        .comments
+        .unwrap_or_default()
+}
+
+/// The comment (`CM_ SG_`) of signal `name` of message `message_id`; empty when none.
+fn signal_comment(
+    dbc: &can_dbc::Dbc,
+    message_id: can_dbc::MessageId,
+    name: &str,
+) -> Cow<'static, str> {
+    dbc.comments
         .iter()
         .find_map(|c| match c {
             can_dbc::Comment::Signal {
                 message_id: id,
-                name,
+                name: signal,
                 comment,
-            } if *id == message_id && *name == s.name => Some(owned(comment)),
+            } if *id == message_id && signal == name => Some(owned(comment)),
             _ => None,
         })
-        .unwrap_or_default();
-    let spec = SignalSpec {
-        name: owned(&s.name),
-        start_bit: s.start_bit as u16,
-        size: s.size as u8,
-        byte_order: match s.byte_order {
-            can_dbc::ByteOrder::LittleEndian => ByteOrder::Intel,
-            can_dbc::ByteOrder::BigEndian => ByteOrder::Motorola,
-        },
-        signed: matches!(s.value_type, can_dbc::ValueType::Signed),
-        factor: s.factor,
-        offset: s.offset,
-        min,
-        max,
-        unit: owned(&s.unit),
-        receivers: Cow::Owned(
-            s.receivers
-                .iter()
-                .filter(|r| r.as_str() != "Vector__XXX")
-                .map(|r| owned(r))
-                .collect(),
-        ),
-        values: Cow::Owned(values),
-        comment,
-    };
-    if spec.bit_positions().iter().any(|&b| b >= 64) {
-        return Err(bad(format!(
-            "bits {}|{} run outside the 8-byte frame",
-            s.start_bit, s.size
-        )));
-    }
-    Ok(spec)
+        .unwrap_or_default()
 }
 
 fn check_layout(message: &str, signals: &[SignalSpec]) -> Result<(), SpecError> {

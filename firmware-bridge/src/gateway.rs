@@ -53,7 +53,7 @@ pub use routing::{LocalReason, RoutingTable, Side, Verdict};
 pub use stats::{DirectionStats, GatewayStats, LatencySummary, LocalCounts, MessageCounts};
 
 use log::ForwardLog;
-use socket::{GatewaySocket, ReadOutcome};
+use socket::{GatewaySocket, RawFrame, ReadOutcome};
 
 use crate::can::QueueDrops;
 use stats::DirectionCounters;
@@ -241,6 +241,15 @@ impl Shared {
         }
     }
 
+    /// Flush the forwarded-frame log, when there is one; the first error is kept.
+    fn flush_log(&self) {
+        if let Some(log) = &self.log
+            && let Err(e) = lock(log).flush()
+        {
+            lock(&self.log_error).get_or_insert(e.to_string());
+        }
+    }
+
     fn counters(&self, from: Side) -> &Mutex<DirectionCounters> {
         match from {
             Side::Sim => &self.to_physical,
@@ -419,11 +428,7 @@ impl GatewayHandle {
                 self.shared.fail("a forwarding thread panicked".to_owned());
             }
         }
-        if let Some(log) = &self.shared.log
-            && let Err(e) = lock(log).flush()
-        {
-            lock(&self.shared.log_error).get_or_insert(e.to_string());
-        }
+        self.shared.flush_log();
     }
 }
 
@@ -511,41 +516,19 @@ fn forward(
     // pair refreshed every second: one clock read per frame less (clock reads cost
     // microseconds in an emulated VM, whose clock source is the HPET).
     let mut wall_base = wall_clock_base();
-    let queue_drops = |c: &Mutex<DirectionCounters>| {
-        if let Some(d) = from.queue_drops() {
-            lock(c).overflow_total(d);
-        }
-    };
     while !shared.stop.load(Ordering::Relaxed) {
         let (frame, drops) = match from.read(&mut cmsg) {
             Ok(ReadOutcome::Frame(frame, drops)) => (frame, drops),
             Ok(ReadOutcome::Timeout) => {
                 // The bus is idle: the kernel's drop count, and the log on disk.
-                queue_drops(counters);
-                if let Some(log) = &shared.log
-                    && let Err(e) = lock(log).flush()
-                {
-                    lock(&shared.log_error).get_or_insert(e.to_string());
-                }
+                count_queue_drops(from, counters);
+                shared.flush_log();
                 continue;
             }
-            Err(e) => match e.raw_os_error() {
-                Some(libc::ENODEV | libc::ENXIO) => {
-                    return Err(GatewayError::InterfaceGone {
-                        iface: from.iface().to_owned(),
-                        source: e,
-                    });
-                }
-                _ => {
-                    lock(counters).rx_errors += 1;
-                    if logged_errors < 10 {
-                        logged_errors += 1;
-                        tracing::warn!(iface = from.iface(), "receive error: {e}");
-                    }
-                    std::thread::sleep(ERROR_PAUSE);
-                    continue;
-                }
-            },
+            Err(e) => {
+                receive_error(from, counters, e, &mut logged_errors)?;
+                continue;
+            }
         };
         let read_at = Instant::now();
         let verdict = shared.table.route(side, frame.can_id(), frame.data());
@@ -566,55 +549,16 @@ fn forward(
         if sent_at.saturating_duration_since(wall_base.0) > Duration::from_secs(1) {
             wall_base = wall_clock_base();
         }
-        let sent_wall = wall_base.1 + sent_at.saturating_duration_since(wall_base.0);
-        {
-            let mut c = lock(counters);
-            c.received();
-            if let Some(d) = drops {
-                c.overflow_total(d);
-            }
-            c.tx_retries += retries;
-            match &sent {
-                Ok(()) => {
-                    let handling = sent_at.duration_since(read_at);
-                    let latency = frame
-                        .stamp
-                        .map(|t| sent_wall.duration_since(t).unwrap_or_default())
-                        .unwrap_or(handling);
-                    c.forwarded(message, latency, frame.stamp.is_some(), handling);
-                }
-                Err(SendFailure::GaveUp(e)) => {
-                    c.tx_dropped += 1;
-                    if c.tx_dropped <= 10 || c.tx_dropped.is_power_of_two() {
-                        tracing::warn!(
-                            to = to.iface(),
-                            dropped = c.tx_dropped,
-                            "frame {:#x} given up after {retries} retries: {e}",
-                            frame.can_id()
-                        );
-                    }
-                }
-                Err(SendFailure::Gone(_)) => {}
-            }
-        }
-        match sent {
-            Ok(()) => {
-                if let Some(log) = &shared.log {
-                    let rx = frame.stamp.unwrap_or_else(|| {
-                        sent_wall
-                            .checked_sub(sent_at.duration_since(read_at))
-                            .unwrap_or(sent_wall)
-                    });
-                    if let Err(e) = lock(log).write(&frame, from.iface(), to.iface(), rx, sent_wall)
-                    {
-                        let mut err = lock(&shared.log_error);
-                        if err.is_none() {
-                            tracing::error!("writing the forwarded-frame log: {e}");
-                            *err = Some(e.to_string());
-                        }
-                    }
-                }
-            }
+        let passage = Passage {
+            read_at,
+            sent_at,
+            sent_wall: wall_base.1 + sent_at.saturating_duration_since(wall_base.0),
+            retries,
+            sent,
+        };
+        count_passage(counters, to, &frame, drops, message, &passage);
+        match passage.sent {
+            Ok(()) => log_forwarded(shared, &frame, from, to, &passage),
             Err(SendFailure::Gone(e)) => {
                 return Err(GatewayError::InterfaceGone {
                     iface: to.iface().to_owned(),
@@ -624,8 +568,120 @@ fn forward(
             Err(SendFailure::GaveUp(_)) => {}
         }
     }
-    queue_drops(counters);
+    count_queue_drops(from, counters);
     Ok(())
+}
+
+/// The kernel's count of frames dropped from `from`'s receive queue, when it says.
+fn count_queue_drops(from: &GatewaySocket, counters: &Mutex<DirectionCounters>) {
+    if let Some(d) = from.queue_drops() {
+        lock(counters).overflow_total(d);
+    }
+}
+
+/// A receive error: the end of forwarding when the interface is gone; otherwise
+/// counted (the first ten logged) and waited out for [`ERROR_PAUSE`].
+fn receive_error(
+    from: &GatewaySocket,
+    counters: &Mutex<DirectionCounters>,
+    e: io::Error,
+    logged_errors: &mut u32,
+) -> Result<(), GatewayError> {
+    match e.raw_os_error() {
+        Some(libc::ENODEV | libc::ENXIO) => Err(GatewayError::InterfaceGone {
+            iface: from.iface().to_owned(),
+            source: e,
+        }),
+        _ => {
+            lock(counters).rx_errors += 1;
+            if *logged_errors < 10 {
+                *logged_errors += 1;
+                tracing::warn!(iface = from.iface(), "receive error: {e}");
+            }
+            std::thread::sleep(ERROR_PAUSE);
+            Ok(())
+        }
+    }
+}
+
+/// A frame's way through the gateway: when it was read, when its send ended
+/// (monotonic and wall-clock), the retries the send took and how it ended.
+struct Passage {
+    read_at: Instant,
+    sent_at: Instant,
+    sent_wall: SystemTime,
+    retries: u64,
+    sent: Result<(), SendFailure>,
+}
+
+/// Count a frame routed to `to` (DBC message `message`): received, forwarded with
+/// its latency (from the kernel's receive stamp when there is one, else from the
+/// read), or given up (the first ten and every power of two logged).
+fn count_passage(
+    counters: &Mutex<DirectionCounters>,
+    to: &GatewaySocket,
+    frame: &RawFrame,
+    drops: Option<u32>,
+    message: usize,
+    passage: &Passage,
+) {
+    let mut c = lock(counters);
+    c.received();
+    if let Some(d) = drops {
+        c.overflow_total(d);
+    }
+    c.tx_retries += passage.retries;
+    match &passage.sent {
+        Ok(()) => {
+            let handling = passage.sent_at.duration_since(passage.read_at);
+            let latency = frame
+                .stamp
+                .map(|t| passage.sent_wall.duration_since(t).unwrap_or_default())
+                .unwrap_or(handling);
+            c.forwarded(message, latency, frame.stamp.is_some(), handling);
+        }
+        Err(SendFailure::GaveUp(e)) => {
+            c.tx_dropped += 1;
+            if c.tx_dropped <= 10 || c.tx_dropped.is_power_of_two() {
+                tracing::warn!(
+                    to = to.iface(),
+                    dropped = c.tx_dropped,
+                    "frame {:#x} given up after {} retries: {e}",
+                    frame.can_id(),
+                    passage.retries
+                );
+            }
+        }
+        Err(SendFailure::Gone(_)) => {}
+    }
+}
+
+/// Write a forwarded frame to the log, when there is one: received at the kernel's
+/// stamp (or the read, back from the send's wall-clock time), sent at the send's end.
+/// The first write error is kept (and logged); forwarding goes on.
+fn log_forwarded(
+    shared: &Shared,
+    frame: &RawFrame,
+    from: &GatewaySocket,
+    to: &GatewaySocket,
+    passage: &Passage,
+) {
+    let Some(log) = &shared.log else {
+        return;
+    };
+    let sent_wall = passage.sent_wall;
+    let rx = frame.stamp.unwrap_or_else(|| {
+        sent_wall
+            .checked_sub(passage.sent_at.duration_since(passage.read_at))
+            .unwrap_or(sent_wall)
+    });
+    if let Err(e) = lock(log).write(frame, from.iface(), to.iface(), rx, sent_wall) {
+        let mut err = lock(&shared.log_error);
+        if err.is_none() {
+            tracing::error!("writing the forwarded-frame log: {e}");
+            *err = Some(e.to_string());
+        }
+    }
 }
 
 #[cfg(test)]

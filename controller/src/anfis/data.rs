@@ -403,6 +403,9 @@ fn json_objects(items: &[Value], inputs: Vec<String>, target: &str) -> Result<Da
     Dataset::new(inputs, target.to_string(), rows, targets)
 }
 
+/// `{"inputs": [[...]], "targets": [...]}`, optionally with `input_names` and
+/// `target_name`: the columns `inputs` names (all of them when empty), the target
+/// `target` (the file's `target_name`, or `y`, when empty).
 fn json_matrix(
     map: &serde_json::Map<String, Value>,
     inputs: Vec<String>,
@@ -415,10 +418,6 @@ fn json_matrix(
             reason: format!("unknown field (expected {})", KEYS.join(", ")),
         });
     }
-    let field_err = |location: &str, reason: String| AnfisError::JsonData {
-        location: location.into(),
-        reason,
-    };
     let Some(Value::Array(rows_json)) = map.get("inputs") else {
         return Err(field_err(
             "inputs",
@@ -431,7 +430,35 @@ fn json_matrix(
             "missing or not an array of numbers".into(),
         ));
     };
-    let file_names: Option<Vec<String>> = match map.get("input_names") {
+    let file_names = json_input_names(map)?;
+    let target_name = json_target_name(map, target)?;
+    let (matrix, width) = json_input_rows(rows_json, file_names.as_deref())?;
+    let targets = targets_json
+        .iter()
+        .enumerate()
+        .map(|(k, v)| json_number(Some(v), || format!("targets[{k}]")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (names, selection) = select_columns(file_names, inputs, width)?;
+    let rows = matrix
+        .into_iter()
+        .map(|r| selection.iter().map(|&j| r[j]).collect())
+        .collect();
+    Dataset::new(names, target_name, rows, targets)
+}
+
+/// An error at `location` in JSON data.
+fn field_err(location: &str, reason: String) -> AnfisError {
+    AnfisError::JsonData {
+        location: location.into(),
+        reason,
+    }
+}
+
+/// The file's `input_names`, when given.
+fn json_input_names(
+    map: &serde_json::Map<String, Value>,
+) -> Result<Option<Vec<String>>, AnfisError> {
+    Ok(match map.get("input_names") {
         None => None,
         Some(Value::Array(names)) => Some(
             names
@@ -450,13 +477,21 @@ fn json_matrix(
                 format!("not an array of strings ({other})"),
             ));
         }
-    };
+    })
+}
+
+/// The target's name: `target` (which the file's `target_name`, when given, must
+/// match), or when empty the file's `target_name`, or `y`.
+fn json_target_name(
+    map: &serde_json::Map<String, Value>,
+    target: &str,
+) -> Result<String, AnfisError> {
     let file_target = match map.get("target_name") {
         None => None,
         Some(Value::String(s)) => Some(s.clone()),
         Some(other) => return Err(field_err("target_name", format!("not a string ({other})"))),
     };
-    let target_name = match (&file_target, target.is_empty()) {
+    Ok(match (&file_target, target.is_empty()) {
         (Some(ft), false) if ft != target => {
             return Err(AnfisError::MissingColumn {
                 name: target.to_string(),
@@ -466,8 +501,15 @@ fn json_matrix(
         (_, false) => target.to_string(),
         (Some(ft), true) => ft.clone(),
         (None, true) => "y".to_string(),
-    };
+    })
+}
 
+/// The rows of `inputs`, each a number for every input column (as many as the file's
+/// `input_names`, or the first row's length), and that width.
+fn json_input_rows(
+    rows_json: &[Value],
+    file_names: Option<&[String]>,
+) -> Result<(Vec<Vec<f64>>, usize), AnfisError> {
     let mut matrix = Vec::with_capacity(rows_json.len());
     for (k, row) in rows_json.iter().enumerate() {
         let Value::Array(values) = row else {
@@ -484,7 +526,7 @@ fn json_matrix(
                 .collect::<Result<Vec<_>, _>>()?,
         );
     }
-    let width = match &file_names {
+    let width = match file_names {
         Some(names) => names.len(),
         None => matrix.first().map_or(0, Vec::len),
     };
@@ -494,13 +536,18 @@ fn json_matrix(
             format!("has {} values, expected {width}", row.len()),
         ));
     }
-    let targets = targets_json
-        .iter()
-        .enumerate()
-        .map(|(k, v)| json_number(Some(v), || format!("targets[{k}]")))
-        .collect::<Result<Vec<_>, _>>()?;
+    Ok((matrix, width))
+}
 
-    let (names, selection): (Vec<String>, Vec<usize>) = match (file_names, inputs.is_empty()) {
+/// The model's input names and the column of each among the `width` in the file:
+/// `inputs` picked by the file's names, or all columns in order (named by the file,
+/// by `inputs`, or x1, x2, ...).
+fn select_columns(
+    file_names: Option<Vec<String>>,
+    inputs: Vec<String>,
+    width: usize,
+) -> Result<(Vec<String>, Vec<usize>), AnfisError> {
+    Ok(match (file_names, inputs.is_empty()) {
         (Some(names), true) => (names, (0..width).collect()),
         (Some(names), false) => {
             let selection = inputs
@@ -530,10 +577,5 @@ fn json_matrix(
             }
             (inputs, (0..width).collect())
         }
-    };
-    let rows = matrix
-        .into_iter()
-        .map(|r| selection.iter().map(|&j| r[j]).collect())
-        .collect();
-    Dataset::new(names, target_name, rows, targets)
+    })
 }

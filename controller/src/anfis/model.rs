@@ -119,90 +119,102 @@ fn validate(spec: &ModelSpec) -> Result<(), AnfisError> {
     if spec.inputs.is_empty() {
         return Err(invalid("inputs", "at least one input is required"));
     }
-    let n = spec.inputs.len();
     for (i, input) in spec.inputs.iter().enumerate() {
-        if input.name.is_empty() {
-            return Err(invalid(format!("inputs[{i}].name"), "must not be empty"));
-        }
-        if spec.inputs[..i].iter().any(|o| o.name == input.name) {
-            return Err(invalid(
-                format!("inputs[{i}].name"),
-                format!("duplicate input name '{}'", input.name),
-            ));
-        }
-        let [lo, hi] = input.range;
-        check_finite(|| format!("inputs[{i}].range[0]"), lo)?;
-        check_finite(|| format!("inputs[{i}].range[1]"), hi)?;
-        if lo >= hi || !(hi - lo).is_finite() {
-            return Err(invalid(
-                format!("inputs[{i}].range"),
-                format!("needs lo < hi with a finite span, got [{lo}, {hi}]"),
-            ));
-        }
-        if input.mfs.is_empty() {
-            return Err(invalid(
-                format!("inputs[{i}].mfs"),
-                "at least one MF is required",
-            ));
-        }
-        for (j, mf) in input.mfs.iter().enumerate() {
-            check_finite(|| format!("inputs[{i}].mfs[{j}].a"), mf.a)?;
-            check_finite(|| format!("inputs[{i}].mfs[{j}].b"), mf.b)?;
-            check_finite(|| format!("inputs[{i}].mfs[{j}].c"), mf.c)?;
-            if mf.a <= 0.0 {
-                return Err(invalid(
-                    format!("inputs[{i}].mfs[{j}].a"),
-                    format!("the width must be positive, got {}", mf.a),
-                ));
-            }
-            if mf.b <= 0.0 {
-                return Err(invalid(
-                    format!("inputs[{i}].mfs[{j}].b"),
-                    format!("the slope exponent must be positive, got {}", mf.b),
-                ));
-            }
-        }
+        validate_input(i, input, &spec.inputs[..i])?;
     }
     if spec.rules.is_empty() {
         return Err(invalid("rules", "at least one rule is required"));
     }
     for (r, rule) in spec.rules.iter().enumerate() {
-        if rule.antecedent.len() != n {
-            return Err(invalid(
-                format!("rules[{r}].antecedent"),
-                format!(
-                    "has {} entries, the model has {n} inputs",
-                    rule.antecedent.len()
-                ),
-            ));
-        }
-        for (i, (&m, input)) in rule.antecedent.iter().zip(&spec.inputs).enumerate() {
-            if m >= input.mfs.len() {
-                return Err(invalid(
-                    format!("rules[{r}].antecedent[{i}]"),
-                    format!(
-                        "MF index {m} out of range: input '{}' has {} MFs",
-                        input.name,
-                        input.mfs.len()
-                    ),
-                ));
-            }
-        }
-        if rule.p.len() != n {
-            return Err(invalid(
-                format!("rules[{r}].p"),
-                format!(
-                    "has {} coefficients, the model has {n} inputs",
-                    rule.p.len()
-                ),
-            ));
-        }
-        for (i, &p) in rule.p.iter().enumerate() {
-            check_finite(|| format!("rules[{r}].p[{i}]"), p)?;
-        }
-        check_finite(|| format!("rules[{r}].r"), rule.r)?;
+        validate_rule(r, rule, &spec.inputs)?;
     }
     Ok(())
+}
+
+/// Input `i`: a name none of the `earlier` inputs has, a finite range with lo < hi,
+/// and at least one valid MF.
+fn validate_input(i: usize, input: &InputSpec, earlier: &[InputSpec]) -> Result<(), AnfisError> {
+    if input.name.is_empty() {
+        return Err(invalid(format!("inputs[{i}].name"), "must not be empty"));
+    }
+    if earlier.iter().any(|o| o.name == input.name) {
+        return Err(invalid(
+            format!("inputs[{i}].name"),
+            format!("duplicate input name '{}'", input.name),
+        ));
+    }
+    let [lo, hi] = input.range;
+    check_finite(|| format!("inputs[{i}].range[0]"), lo)?;
+    check_finite(|| format!("inputs[{i}].range[1]"), hi)?;
+    if lo >= hi || !(hi - lo).is_finite() {
+        return Err(invalid(
+            format!("inputs[{i}].range"),
+            format!("needs lo < hi with a finite span, got [{lo}, {hi}]"),
+        ));
+    }
+    if input.mfs.is_empty() {
+        return Err(invalid(
+            format!("inputs[{i}].mfs"),
+            "at least one MF is required",
+        ));
+    }
+    for (j, mf) in input.mfs.iter().enumerate() {
+        check_finite(|| format!("inputs[{i}].mfs[{j}].a"), mf.a)?;
+        check_finite(|| format!("inputs[{i}].mfs[{j}].b"), mf.b)?;
+        check_finite(|| format!("inputs[{i}].mfs[{j}].c"), mf.c)?;
+        if mf.a <= 0.0 {
+            return Err(invalid(
+                format!("inputs[{i}].mfs[{j}].a"),
+                format!("the width must be positive, got {}", mf.a),
+            ));
+        }
+        if mf.b <= 0.0 {
+            return Err(invalid(
+                format!("inputs[{i}].mfs[{j}].b"),
+                format!("the slope exponent must be positive, got {}", mf.b),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Rule `r`: an MF of each input, and finite coefficients, one per input.
+fn validate_rule(r: usize, rule: &RuleSpec, inputs: &[InputSpec]) -> Result<(), AnfisError> {
+    let n = inputs.len();
+    if rule.antecedent.len() != n {
+        return Err(invalid(
+            format!("rules[{r}].antecedent"),
+            format!(
+                "has {} entries, the model has {n} inputs",
+                rule.antecedent.len()
+            ),
+        ));
+    }
+    for (i, (&m, input)) in rule.antecedent.iter().zip(inputs).enumerate() {
+        if m >= input.mfs.len() {
+            return Err(invalid(
+                format!("rules[{r}].antecedent[{i}]"),
+                format!(
+                    "MF index {m} out of range: input '{}' has {} MFs",
+                    input.name,
+                    input.mfs.len()
+                ),
+            ));
+        }
+    }
+    if rule.p.len() != n {
+        return Err(invalid(
+            format!("rules[{r}].p"),
+            format!(
+                "has {} coefficients, the model has {n} inputs",
+                rule.p.len()
+            ),
+        ));
+    }
+    for (i, &p) in rule.p.iter().enumerate() {
+        check_finite(|| format!("rules[{r}].p[{i}]"), p)?;
+    }
+    check_finite(|| format!("rules[{r}].r"), rule.r)
 }
 
 /// Scratch space of one forward pass (reused across rows while training).

@@ -392,56 +392,9 @@ fn train_impl(
             ),
         });
     }
-    let ranges = config
-        .input_ranges
-        .clone()
-        .unwrap_or_else(|| data.input_ranges());
-    for (name, &[lo, hi]) in data.input_names().iter().zip(&ranges) {
-        if lo >= hi {
-            return Err(AnfisError::DegenerateRange {
-                name: name.clone(),
-                lo,
-                hi,
-            });
-        }
-    }
-    let inputs = data
-        .input_names()
-        .iter()
-        .zip(&ranges)
-        .zip(&mfs)
-        .map(|((name, &range), &m)| InputSpec {
-            name: name.clone(),
-            range,
-            mfs: initial_mfs(m),
-        })
-        .collect();
-    let mut model = AnfisModel::new(ModelSpec {
-        format: MODEL_FORMAT.into(),
-        version: MODEL_VERSION,
-        inputs,
-        output: data.target_name().to_string(),
-        rules: grid_rules(&mfs)?,
-    })?;
-
+    let mut model = initial_model(data, config, &mfs)?;
     let rules = model.n_rules();
-    let width = n + 1;
-    let cols = rules
-        .checked_mul(width)
-        .ok_or_else(|| config_err("mfs_per_input", "too many consequent parameters"))?;
-    if data
-        .len()
-        .checked_mul(cols)
-        .is_none_or(|cells| cells > MAX_DESIGN_CELLS)
-    {
-        return Err(config_err(
-            "mfs_per_input",
-            format!(
-                "{} data rows x {cols} consequent parameters ({rules} rules x {width}) exceed the least squares' bound of {MAX_DESIGN_CELLS} cells: use fewer MFs or fewer rows",
-                data.len()
-            ),
-        ));
-    }
+    let cols = consequent_columns(data, rules, n + 1)?;
     let targets = DVector::from_column_slice(data.targets());
     let mut design = DMatrix::<f64>::zeros(data.len(), cols);
     let mut ws = Workspace::new(model.spec());
@@ -464,28 +417,7 @@ fn train_impl(
     let mut best: Option<(f64, AnfisModel)> = None;
 
     for epoch in 0..config.epochs {
-        // Forward pass, premises fixed: row p of A is [wbar_r u_p, wbar_r] per rule.
-        for (p, x) in data.rows().enumerate() {
-            model.forward(x, &mut ws)?;
-            for (r, &w) in ws.wbar.iter().enumerate() {
-                for (i, &u) in ws.u.iter().enumerate() {
-                    design[(p, r * width + i)] = w * u;
-                }
-                design[(p, r * width + n)] = w;
-            }
-        }
-        let theta = least_squares(&design, &targets)?;
-        for (r, rule) in model.spec_mut().rules.iter_mut().enumerate() {
-            for (i, p) in rule.p.iter_mut().enumerate() {
-                *p = theta[r * width + i];
-            }
-            rule.r = theta[r * width + n];
-        }
-        if theta.iter().any(|v| !v.is_finite()) {
-            return Err(AnfisError::Numerical {
-                reason: format!("epoch {epoch}: non-finite consequent parameters"),
-            });
-        }
+        let theta = fit_consequents(&mut model, data, &mut ws, &mut design, &targets, epoch)?;
         let residual = &design * &theta - &targets;
         let training = (residual.norm_squared() / data.len() as f64).sqrt();
         report.training_rmse.push(training);
@@ -515,29 +447,139 @@ fn train_impl(
         if training <= config.error_goal || epoch + 1 == config.epochs {
             break;
         }
-
-        // Backward pass, consequents fixed: a step of length k against the gradient.
-        let (_, grad) = model.squared_error_gradient(data)?;
-        let norm = grad
-            .iter()
-            .flatten()
-            .map(|g| g.a * g.a + g.b * g.b + g.c * g.c)
-            .sum::<f64>()
-            .sqrt();
-        if !(norm.is_finite() && norm > 0.0) {
-            continue;
-        }
-        let eta = step.k / norm;
-        for (input, g) in model.spec_mut().inputs.iter_mut().zip(&grad) {
-            for (mf, g) in input.mfs.iter_mut().zip(g) {
-                mf.a = (mf.a - eta * g.a).max(config.min_width);
-                mf.b = (mf.b - eta * g.b).max(config.min_shape);
-                mf.c -= eta * g.c;
-            }
-        }
+        descend_premises(&mut model, data, step.k, config)?;
     }
     let model = best.map(|(_, m)| m).unwrap_or(model);
     Ok((model, report))
+}
+
+/// The untrained model: each input's range (the configured ones, or the data's) split
+/// by its initial MFs, and the full grid of rules.
+fn initial_model(
+    data: &Dataset,
+    config: &TrainConfig,
+    mfs: &[usize],
+) -> Result<AnfisModel, AnfisError> {
+    let ranges = config
+        .input_ranges
+        .clone()
+        .unwrap_or_else(|| data.input_ranges());
+    for (name, &[lo, hi]) in data.input_names().iter().zip(&ranges) {
+        if lo >= hi {
+            return Err(AnfisError::DegenerateRange {
+                name: name.clone(),
+                lo,
+                hi,
+            });
+        }
+    }
+    let inputs = data
+        .input_names()
+        .iter()
+        .zip(&ranges)
+        .zip(mfs)
+        .map(|((name, &range), &m)| InputSpec {
+            name: name.clone(),
+            range,
+            mfs: initial_mfs(m),
+        })
+        .collect();
+    AnfisModel::new(ModelSpec {
+        format: MODEL_FORMAT.into(),
+        version: MODEL_VERSION,
+        inputs,
+        output: data.target_name().to_string(),
+        rules: grid_rules(mfs)?,
+    })
+}
+
+/// The design matrix's columns, `rules` times `width` (the inputs + 1), refused when
+/// the matrix would exceed [`MAX_DESIGN_CELLS`].
+fn consequent_columns(data: &Dataset, rules: usize, width: usize) -> Result<usize, AnfisError> {
+    let cols = rules
+        .checked_mul(width)
+        .ok_or_else(|| config_err("mfs_per_input", "too many consequent parameters"))?;
+    if data
+        .len()
+        .checked_mul(cols)
+        .is_none_or(|cells| cells > MAX_DESIGN_CELLS)
+    {
+        return Err(config_err(
+            "mfs_per_input",
+            format!(
+                "{} data rows x {cols} consequent parameters ({rules} rules x {width}) exceed the least squares' bound of {MAX_DESIGN_CELLS} cells: use fewer MFs or fewer rows",
+                data.len()
+            ),
+        ));
+    }
+    Ok(cols)
+}
+
+/// The forward pass, premises fixed: fills the design matrix (row p is
+/// [wbar_r u_p, wbar_r] per rule), solves the consequents by least squares and sets
+/// them in the model. Returns them (theta).
+fn fit_consequents(
+    model: &mut AnfisModel,
+    data: &Dataset,
+    ws: &mut Workspace,
+    design: &mut DMatrix<f64>,
+    targets: &DVector<f64>,
+    epoch: usize,
+) -> Result<DVector<f64>, AnfisError> {
+    let n = data.n_inputs();
+    let width = n + 1;
+    for (p, x) in data.rows().enumerate() {
+        model.forward(x, ws)?;
+        for (r, &w) in ws.wbar.iter().enumerate() {
+            for (i, &u) in ws.u.iter().enumerate() {
+                design[(p, r * width + i)] = w * u;
+            }
+            design[(p, r * width + n)] = w;
+        }
+    }
+    let theta = least_squares(design, targets)?;
+    for (r, rule) in model.spec_mut().rules.iter_mut().enumerate() {
+        for (i, p) in rule.p.iter_mut().enumerate() {
+            *p = theta[r * width + i];
+        }
+        rule.r = theta[r * width + n];
+    }
+    if theta.iter().any(|v| !v.is_finite()) {
+        return Err(AnfisError::Numerical {
+            reason: format!("epoch {epoch}: non-finite consequent parameters"),
+        });
+    }
+    Ok(theta)
+}
+
+/// The backward pass, consequents fixed: a step of length `k` against the gradient
+/// of the premises (none when the gradient is zero or not finite), widths and shapes
+/// kept at their minimums.
+fn descend_premises(
+    model: &mut AnfisModel,
+    data: &Dataset,
+    k: f64,
+    config: &TrainConfig,
+) -> Result<(), AnfisError> {
+    let (_, grad) = model.squared_error_gradient(data)?;
+    let norm = grad
+        .iter()
+        .flatten()
+        .map(|g| g.a * g.a + g.b * g.b + g.c * g.c)
+        .sum::<f64>()
+        .sqrt();
+    if !(norm.is_finite() && norm > 0.0) {
+        return Ok(());
+    }
+    let eta = k / norm;
+    for (input, g) in model.spec_mut().inputs.iter_mut().zip(&grad) {
+        for (mf, g) in input.mfs.iter_mut().zip(g) {
+            mf.a = (mf.a - eta * g.a).max(config.min_width);
+            mf.b = (mf.b - eta * g.b).max(config.min_shape);
+            mf.c -= eta * g.c;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

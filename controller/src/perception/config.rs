@@ -204,11 +204,44 @@ fn non_negative(field: &'static str, v: f64) -> Result<(), PerceptionError> {
 impl PerceptionConfig {
     /// Checks every field's domain.
     pub fn validate(&self) -> Result<(), PerceptionError> {
+        self.validate_ranges()?;
+        self.validate_segmentation()?;
+        self.validate_tracking()
+    }
+
+    /// The detection and memory radii, and every tuning value's magnitude.
+    fn validate_ranges(&self) -> Result<(), PerceptionError> {
         positive("detection_radius", self.detection_radius)?;
         positive("moving_detection_radius", self.moving_detection_radius)?;
         // No tuning value is anywhere near this: larger ones are typing errors (and
         // beyond f32 they turn into infinities in the laser's single precision).
+        for (field, v) in self.tuning_values() {
+            if v.abs() > PLAUSIBLE_LIMIT {
+                return Err(invalid(
+                    field,
+                    format!("must be at most {PLAUSIBLE_LIMIT} in magnitude, got {v}"),
+                ));
+            }
+        }
+        // The longest-range 2D scanners reach 80 m (LMS291).
+        non_negative("memory_radius", self.memory_radius)?;
         for (field, v) in [
+            ("detection_radius", self.detection_radius),
+            ("moving_detection_radius", self.moving_detection_radius),
+            ("memory_radius", self.memory_radius),
+        ] {
+            if v > 100.0 {
+                return Err(invalid(field, format!("must be at most 100 m, got {v}")));
+            }
+        }
+        non_negative("moving_confirm_s", self.moving_confirm_s)?;
+        non_negative("moving_memory_s", self.moving_memory_s)?;
+        Ok(())
+    }
+
+    /// The tuning values whose magnitude [`PLAUSIBLE_LIMIT`] bounds, by field.
+    fn tuning_values(&self) -> [(&'static str, f64); 31] {
+        [
             ("detection_radius", self.detection_radius),
             ("moving_detection_radius", self.moving_detection_radius),
             ("range_noise_sigma", self.range_noise_sigma),
@@ -243,27 +276,11 @@ impl PerceptionConfig {
             ("velocity_hold_chi2", self.velocity_hold_chi2),
             ("moving_confirm_s", self.moving_confirm_s),
             ("moving_memory_s", self.moving_memory_s),
-        ] {
-            if v.abs() > PLAUSIBLE_LIMIT {
-                return Err(invalid(
-                    field,
-                    format!("must be at most {PLAUSIBLE_LIMIT} in magnitude, got {v}"),
-                ));
-            }
-        }
-        // The longest-range 2D scanners reach 80 m (LMS291).
-        non_negative("memory_radius", self.memory_radius)?;
-        for (field, v) in [
-            ("detection_radius", self.detection_radius),
-            ("moving_detection_radius", self.moving_detection_radius),
-            ("memory_radius", self.memory_radius),
-        ] {
-            if v > 100.0 {
-                return Err(invalid(field, format!("must be at most 100 m, got {v}")));
-            }
-        }
-        non_negative("moving_confirm_s", self.moving_confirm_s)?;
-        non_negative("moving_memory_s", self.moving_memory_s)?;
+        ]
+    }
+
+    /// The segmentation: range noise, breakpoints, circle and line fits, walls.
+    fn validate_segmentation(&self) -> Result<(), PerceptionError> {
         positive("range_noise_sigma", self.range_noise_sigma)?;
         if !(self.breakpoint_lambda_deg > 0.0 && self.breakpoint_lambda_deg < 90.0) {
             return Err(invalid(
@@ -301,6 +318,12 @@ impl PerceptionConfig {
         positive("wall_angle_gate_deg", self.wall_angle_gate_deg)?;
         positive("wall_offset_gate", self.wall_offset_gate)?;
         non_negative("wall_gap_gate", self.wall_gap_gate)?;
+        Ok(())
+    }
+
+    /// The tracker: births and deletions, gating, the motion model and the velocity
+    /// tests.
+    fn validate_tracking(&self) -> Result<(), PerceptionError> {
         if self.birth_window < 1 || self.birth_window > 32 {
             return Err(invalid(
                 "birth_window",

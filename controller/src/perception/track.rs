@@ -1007,11 +1007,38 @@ impl Perception {
         self.output(stamp, &pose, false).obstacles
     }
 
+    /// The output as of `stamp`: every track and wall (as segments and as the discs
+    /// that cover them), with `filtered` only the confirmed ones within the detection
+    /// radius (widened by how far a mover reaches) around `pose`.
     fn output(&self, stamp: f64, pose: &Pose2, filtered: bool) -> PerceptionOutput {
+        let within = Within { pose, filtered };
+        let mut obstacles = self.point_obstacles(stamp, &within);
+        let mut segments = Vec::new();
+        for w in &self.walls {
+            if filtered && !w.life.confirmed {
+                continue;
+            }
+            let s = &w.segment;
+            if !filtered
+                || distance_to_segment([pose.x, pose.y], s.p0, s.p1) <= self.cfg.detection_radius
+            {
+                segments.push(w.segment_output(stamp, &self.cfg));
+            }
+            obstacles.extend(w.pieces(stamp, &self.cfg, &within));
+        }
+        obstacles.sort_by_key(|o| (o.id, o.part));
+        segments.sort_by_key(|s| s.id);
+        PerceptionOutput {
+            stamp,
+            obstacles,
+            segments,
+        }
+    }
+
+    /// The point tracks as obstacles: a track sliding along a static wall, or missed
+    /// and not moving, stands where it was last measured and still.
+    fn point_obstacles(&self, stamp: f64, within: &Within<'_>) -> Vec<TrackedObstacle> {
         let cfg = &self.cfg;
-        let within_radius = |x: f64, y: f64, r: f64, radius: f64| {
-            !filtered || (x - pose.x).hypot(y - pose.y) - r <= radius
-        };
         let static_walls: Vec<&SegmentMeasurement> = self
             .walls
             .iter()
@@ -1020,7 +1047,7 @@ impl Perception {
             .collect();
         let mut obstacles = Vec::new();
         for t in &self.tracks {
-            if filtered && !t.life.confirmed {
+            if within.filtered && !t.life.confirmed {
                 continue;
             }
             let (mut x, mut y) = (t.state[0], t.state[1]);
@@ -1038,7 +1065,7 @@ impl Perception {
                 [x, y] = t.measured;
             }
             let [vx, vy] = velocity;
-            if !within_radius(x, y, t.radius, reach([vx, vy], cfg)) {
+            if !within.radius(x, y, t.radius, reach([vx, vy], cfg)) {
                 continue;
             }
             obstacles.push(TrackedObstacle {
@@ -1057,60 +1084,7 @@ impl Perception {
                 misses: t.life.misses,
             });
         }
-        let mut segments = Vec::new();
-        for w in &self.walls {
-            if filtered && !w.life.confirmed {
-                continue;
-            }
-            let s = &w.segment;
-            let confidence = w.life.confidence(cfg);
-            let age = stamp - w.life.born;
-            if !filtered
-                || distance_to_segment([pose.x, pose.y], s.p0, s.p1) <= cfg.detection_radius
-            {
-                segments.push(WallSegment {
-                    id: w.id,
-                    p0: s.p0,
-                    p1: s.p1,
-                    half_thickness: s.half_thickness,
-                    rms: s.rms,
-                    confidence,
-                    age,
-                    hits: w.life.hits,
-                    misses: w.life.misses,
-                });
-            }
-            let [vx, vy] = w.reported_velocity(stamp, cfg);
-            let reach = reach([vx, vy], cfg);
-            let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, cfg);
-            for (part, c) in centres.iter().enumerate() {
-                if !within_radius(c[0], c[1], radius, reach) {
-                    continue;
-                }
-                obstacles.push(TrackedObstacle {
-                    id: w.id,
-                    part: u32::try_from(part).unwrap_or(u32::MAX),
-                    x: c[0],
-                    y: c[1],
-                    radius,
-                    vx,
-                    vy,
-                    velocity_estimate: w.velocity,
-                    kind: ObstacleKind::WallPiece,
-                    confidence,
-                    age,
-                    hits: w.life.hits,
-                    misses: w.life.misses,
-                });
-            }
-        }
-        obstacles.sort_by_key(|o| (o.id, o.part));
-        segments.sort_by_key(|s| s.id);
-        PerceptionOutput {
-            stamp,
-            obstacles,
-            segments,
-        }
+        obstacles
     }
 
     fn check_stamp(&self, stamp: f64) -> Result<(), PerceptionError> {
@@ -1121,6 +1095,75 @@ impl Perception {
             }
             _ => Ok(()),
         }
+    }
+}
+
+/// Which outputs are kept: with `filtered`, only those within a radius of `pose`.
+struct Within<'a> {
+    pose: &'a Pose2,
+    filtered: bool,
+}
+
+impl Within<'_> {
+    /// Whether a disc at (x, y) of radius `r` comes within `radius` of the pose (or
+    /// nothing is filtered).
+    fn radius(&self, x: f64, y: f64, r: f64, radius: f64) -> bool {
+        !self.filtered || (x - self.pose.x).hypot(y - self.pose.y) - r <= radius
+    }
+}
+
+impl WallTrack {
+    /// The wall as a segment of the output.
+    fn segment_output(&self, stamp: f64, cfg: &PerceptionConfig) -> WallSegment {
+        let s = &self.segment;
+        WallSegment {
+            id: self.id,
+            p0: s.p0,
+            p1: s.p1,
+            half_thickness: s.half_thickness,
+            rms: s.rms,
+            confidence: self.life.confidence(cfg),
+            age: stamp - self.life.born,
+            hits: self.life.hits,
+            misses: self.life.misses,
+        }
+    }
+
+    /// The discs that cover the wall, as obstacles (those `within` keeps).
+    fn pieces(
+        &self,
+        stamp: f64,
+        cfg: &PerceptionConfig,
+        within: &Within<'_>,
+    ) -> Vec<TrackedObstacle> {
+        let s = &self.segment;
+        let confidence = self.life.confidence(cfg);
+        let age = stamp - self.life.born;
+        let [vx, vy] = self.reported_velocity(stamp, cfg);
+        let reach = reach([vx, vy], cfg);
+        let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, cfg);
+        let mut pieces = Vec::new();
+        for (part, c) in centres.iter().enumerate() {
+            if !within.radius(c[0], c[1], radius, reach) {
+                continue;
+            }
+            pieces.push(TrackedObstacle {
+                id: self.id,
+                part: u32::try_from(part).unwrap_or(u32::MAX),
+                x: c[0],
+                y: c[1],
+                radius,
+                vx,
+                vy,
+                velocity_estimate: self.velocity,
+                kind: ObstacleKind::WallPiece,
+                confidence,
+                age,
+                hits: self.life.hits,
+                misses: self.life.misses,
+            });
+        }
+        pieces
     }
 }
 

@@ -210,74 +210,8 @@ pub fn scan_from_frame(frame: &LaserFrame, opts: &EncodeOptions) -> Result<ScanD
             value: scale,
         });
     }
-    if frame.angle_increment < 0.0 {
-        return Err(ConvertError::Clockwise(frame.angle_increment));
-    }
-    let start_angle: i32 = fits(
-        "start angle (1/10000 deg)",
-        (f64::from(frame.angle_min).to_degrees() + SICK_FORWARD_DEG) * 10_000.0,
-    )?;
-    let angular_step: u32 = fits(
-        "angular step (1/10000 deg)",
-        f64::from(frame.angle_increment).to_degrees() * 10_000.0,
-    )?;
-    let scan_frequency: u32 = if frame.scan_time > 0.0 {
-        fits(
-            "scan frequency (1/100 Hz)",
-            100.0 / f64::from(frame.scan_time),
-        )?
-    } else {
-        0
-    };
-    let measurement_frequency: u32 = if frame.time_increment > 0.0 {
-        fits(
-            "measurement frequency (100 Hz)",
-            1.0 / (f64::from(frame.time_increment) * 100.0),
-        )?
-    } else {
-        0
-    };
-    let dist: Vec<u16> = frame
-        .ranges()
-        .iter()
-        .map(|&r| raw_distance(r, frame.range_min, frame.range_max, scale))
-        .collect();
-    fn channel<T>(content: &str, start_angle: i32, angular_step: u32, data: Vec<T>) -> Channel<T> {
-        Channel {
-            content: content.to_owned(),
-            scale_factor: 1.0,
-            scale_offset: 0.0,
-            start_angle,
-            angular_step,
-            data,
-        }
-    }
-    let mut channels16 = vec![Channel {
-        scale_factor: scale,
-        ..channel("DIST1", start_angle, angular_step, dist)
-    }];
-    let mut channels8 = Vec::new();
-    let rssi = |max: f32| {
-        frame
-            .intensities()
-            .iter()
-            .map(move |&v| v.clamp(0.0, max).round())
-    };
-    match opts.rssi {
-        RssiChannel::None => {}
-        RssiChannel::Bits8 => channels8.push(channel(
-            "RSSI1",
-            start_angle,
-            angular_step,
-            rssi(255.0).map(|v| v as u8).collect(),
-        )),
-        RssiChannel::Bits16 => channels16.push(channel(
-            "RSSI1",
-            start_angle,
-            angular_step,
-            rssi(65535.0).map(|v| v as u16).collect(),
-        )),
-    }
+    let geometry = ScanGeometry::of(frame)?;
+    let (channels16, channels8) = channels_of(frame, opts, &geometry);
     let name = match &opts.device_name {
         Some(n) => {
             let bytes: Vec<u8> = n.bytes().collect();
@@ -300,8 +234,8 @@ pub fn scan_from_frame(frame: &LaserFrame, opts: &EncodeOptions) -> Result<ScanD
         inputs: [0, 0],
         outputs: [0, 0],
         layer_angle: 0,
-        scan_frequency,
-        measurement_frequency,
+        scan_frequency: geometry.scan_frequency,
+        measurement_frequency: geometry.measurement_frequency,
         encoders: Vec::new(),
         channels16,
         channels8,
@@ -315,6 +249,105 @@ pub fn scan_from_frame(frame: &LaserFrame, opts: &EncodeOptions) -> Result<ScanD
         },
         event: None,
     })
+}
+
+/// A frame's angles and timing in the telegram's units.
+struct ScanGeometry {
+    /// 1/10000 degree, SICK's zero ahead.
+    start_angle: i32,
+    /// 1/10000 degree.
+    angular_step: u32,
+    /// 1/100 Hz; 0 when the frame has no scan time.
+    scan_frequency: u32,
+    /// 100 Hz; 0 when the frame has no time increment.
+    measurement_frequency: u32,
+}
+
+impl ScanGeometry {
+    /// The geometry of a counter-clockwise frame, each value within its field.
+    fn of(frame: &LaserFrame) -> Result<ScanGeometry, ConvertError> {
+        if frame.angle_increment < 0.0 {
+            return Err(ConvertError::Clockwise(frame.angle_increment));
+        }
+        let start_angle: i32 = fits(
+            "start angle (1/10000 deg)",
+            (f64::from(frame.angle_min).to_degrees() + SICK_FORWARD_DEG) * 10_000.0,
+        )?;
+        let angular_step: u32 = fits(
+            "angular step (1/10000 deg)",
+            f64::from(frame.angle_increment).to_degrees() * 10_000.0,
+        )?;
+        let scan_frequency: u32 = if frame.scan_time > 0.0 {
+            fits(
+                "scan frequency (1/100 Hz)",
+                100.0 / f64::from(frame.scan_time),
+            )?
+        } else {
+            0
+        };
+        let measurement_frequency: u32 = if frame.time_increment > 0.0 {
+            fits(
+                "measurement frequency (100 Hz)",
+                1.0 / (f64::from(frame.time_increment) * 100.0),
+            )?
+        } else {
+            0
+        };
+        Ok(ScanGeometry {
+            start_angle,
+            angular_step,
+            scan_frequency,
+            measurement_frequency,
+        })
+    }
+
+    /// A channel of `data` over the scan, unscaled.
+    fn channel<T>(&self, content: &str, data: Vec<T>) -> Channel<T> {
+        Channel {
+            content: content.to_owned(),
+            scale_factor: 1.0,
+            scale_offset: 0.0,
+            start_angle: self.start_angle,
+            angular_step: self.angular_step,
+            data,
+        }
+    }
+}
+
+/// The frame's 16-bit and 8-bit channels: the distances (DIST1, at the scale
+/// factor), and the intensities (RSSI1) when asked for, clamped to their width.
+fn channels_of(
+    frame: &LaserFrame,
+    opts: &EncodeOptions,
+    geometry: &ScanGeometry,
+) -> (Vec<Channel<u16>>, Vec<Channel<u8>>) {
+    let scale = opts.scale_factor;
+    let dist: Vec<u16> = frame
+        .ranges()
+        .iter()
+        .map(|&r| raw_distance(r, frame.range_min, frame.range_max, scale))
+        .collect();
+    let mut channels16 = vec![Channel {
+        scale_factor: scale,
+        ..geometry.channel("DIST1", dist)
+    }];
+    let mut channels8 = Vec::new();
+    let rssi = |max: f32| {
+        frame
+            .intensities()
+            .iter()
+            .map(move |&v| v.clamp(0.0, max).round())
+    };
+    match opts.rssi {
+        RssiChannel::None => {}
+        RssiChannel::Bits8 => {
+            channels8.push(geometry.channel("RSSI1", rssi(255.0).map(|v| v as u8).collect()))
+        }
+        RssiChannel::Bits16 => {
+            channels16.push(geometry.channel("RSSI1", rssi(65535.0).map(|v| v as u16).collect()))
+        }
+    }
+    (channels16, channels8)
 }
 
 fn channel_names(scan: &ScanData) -> String {

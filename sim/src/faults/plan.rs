@@ -279,46 +279,97 @@ impl FaultKind {
     }
 }
 
-/// Each kind: its name, the parameters it takes, and whether it needs a duration
-/// (`Some(true)`), refuses one (`Some(false)`) or takes either (`None`).
-const KINDS: &[(&str, &[&str], Option<bool>)] = &[
-    ("can_drop", &["node", "probability"], None),
-    ("can_silence", &["node"], None),
-    ("can_delay", &["node", "delay_s"], None),
-    ("can_corrupt_crc", &["node"], None),
-    ("can_counter", &["node", "mode"], None),
-    ("can_dlc", &["node", "dlc"], None),
-    ("can_babble", &["id", "rate_hz"], None),
-    ("can_bus_off", &[], None),
-    ("gps_outage", &[], None),
-    ("gps_quality", &["fix"], None),
-    ("gps_jump", &["east_m", "north_m"], None),
-    ("gps_heading_lost", &[], None),
-    ("gps_bad_checksum", &["probability"], None),
-    ("gps_garbage", &["bytes"], None),
-    ("gps_stale", &[], None),
-    ("gps_baud_mismatch", &[], None),
-    ("laser_blackout", &[], None),
-    ("laser_frozen", &[], None),
-    ("laser_nan_storm", &[], None),
-    ("laser_zero_storm", &[], None),
-    ("laser_occluded", &["from_deg", "to_deg"], None),
+/// How a kind is built from its table: its parameters checked and typed.
+type Build = fn(&KindArgs<'_>) -> Result<FaultKind, FieldError>;
+
+/// Each kind: its name, the parameters it takes, whether it needs a duration
+/// (`Some(true)`), refuses one (`Some(false)`) or takes either (`None`), and how it
+/// is built.
+const KINDS: &[(&str, &[&str], Option<bool>, Build)] = &[
+    ("can_drop", &["node", "probability"], None, |a| {
+        Ok(FaultKind::CanDrop {
+            node: a.node()?,
+            probability: a.probability()?,
+        })
+    }),
+    ("can_silence", &["node"], None, |a| {
+        Ok(FaultKind::CanSilence { node: a.node()? })
+    }),
+    ("can_delay", &["node", "delay_s"], None, can_delay),
+    ("can_corrupt_crc", &["node"], None, |a| {
+        Ok(FaultKind::CanCorruptCrc {
+            node: a.ecu_node()?,
+        })
+    }),
+    ("can_counter", &["node", "mode"], None, can_counter),
+    ("can_dlc", &["node", "dlc"], None, can_dlc),
+    ("can_babble", &["id", "rate_hz"], None, can_babble),
+    ("can_bus_off", &[], None, |_| Ok(FaultKind::CanBusOff)),
+    ("gps_outage", &[], None, |_| Ok(FaultKind::GpsOutage)),
+    ("gps_quality", &["fix"], None, gps_quality),
+    ("gps_jump", &["east_m", "north_m"], None, gps_jump),
+    ("gps_heading_lost", &[], None, |_| {
+        Ok(FaultKind::GpsHeadingLost)
+    }),
+    ("gps_bad_checksum", &["probability"], None, |a| {
+        Ok(FaultKind::GpsBadChecksum {
+            probability: a.probability()?,
+        })
+    }),
+    ("gps_garbage", &["bytes"], None, gps_garbage),
+    ("gps_stale", &[], None, |_| Ok(FaultKind::GpsStale)),
+    ("gps_baud_mismatch", &[], None, |_| {
+        Ok(FaultKind::GpsBaudMismatch)
+    }),
+    ("laser_blackout", &[], None, |_| {
+        Ok(FaultKind::LaserBlackout)
+    }),
+    ("laser_frozen", &[], None, |_| Ok(FaultKind::LaserFrozen)),
+    ("laser_nan_storm", &[], None, |_| {
+        Ok(FaultKind::LaserNanStorm)
+    }),
+    ("laser_zero_storm", &[], None, |_| {
+        Ok(FaultKind::LaserZeroStorm)
+    }),
+    (
+        "laser_occluded",
+        &["from_deg", "to_deg"],
+        None,
+        laser_occluded,
+    ),
     (
         "laser_phantom",
         &["range_m", "bearing_deg", "radius_m"],
         None,
+        laser_phantom,
     ),
-    ("steering_stuck", &[], None),
-    ("steering_rate_cut", &["factor"], None),
-    ("steering_offset", &["deg"], None),
-    ("throttle_stuck", &[], None),
-    ("brake_weak", &["factor"], None),
-    ("ecu_fault", &["ecu", "code"], None),
-    ("driver_override", &["deg"], None),
+    ("steering_stuck", &[], None, |_| {
+        Ok(FaultKind::SteeringStuck)
+    }),
+    ("steering_rate_cut", &["factor"], None, |a| {
+        Ok(FaultKind::SteeringRateCut {
+            factor: a.factor()?,
+        })
+    }),
+    ("steering_offset", &["deg"], None, steering_offset),
+    ("throttle_stuck", &[], None, |_| {
+        Ok(FaultKind::ThrottleStuck)
+    }),
+    ("brake_weak", &["factor"], None, |a| {
+        Ok(FaultKind::BrakeWeak {
+            factor: a.factor()?,
+        })
+    }),
+    ("ecu_fault", &["ecu", "code"], None, ecu_fault),
+    ("driver_override", &["deg"], None, driver_override),
     // A killed process does not come back.
-    ("controller_kill", &[], Some(false)),
+    ("controller_kill", &[], Some(false), |_| {
+        Ok(FaultKind::ControllerKill)
+    }),
     // SIGSTOP for a while, then SIGCONT.
-    ("controller_stop", &[], Some(true)),
+    ("controller_stop", &[], Some(true), |_| {
+        Ok(FaultKind::ControllerStop)
+    }),
 ];
 
 /// The kinds' names, for messages and documentation.
@@ -359,7 +410,8 @@ impl FaultSpec {
 
     /// The typed fault; `path` is this table's (`faults[i]`).
     pub fn typed(&self, path: &FieldPath) -> Result<Fault, FieldError> {
-        let Some(&(name, params, needs_duration)) = KINDS.iter().find(|k| k.0 == self.kind) else {
+        let Some(&(name, params, needs_duration, build)) = KINDS.iter().find(|k| k.0 == self.kind)
+        else {
             return Err(FieldError::new(
                 path.key("kind"),
                 format!(
@@ -424,242 +476,248 @@ impl FaultSpec {
             }
             _ => {}
         }
-        let kind = self.kind_of(name, path)?;
+        let kind = build(&KindArgs {
+            spec: self,
+            name,
+            path,
+        })?;
         Ok(Fault {
             kind,
             start,
             duration_s: self.duration_s,
         })
     }
+}
 
-    fn kind_of(&self, name: &str, path: &FieldPath) -> Result<FaultKind, FieldError> {
-        let required = |v: Option<f64>, key: &'static str| {
-            v.ok_or_else(|| FieldError::new(path.key(key), format!("missing: {name} needs {key}")))
-        };
-        let node = || -> Result<Node, FieldError> {
-            let s = self.node.as_deref().ok_or_else(|| {
-                FieldError::new(path.key("node"), format!("missing: {name} needs node"))
-            })?;
-            Node::parse(&path.key("node"), s)
-        };
-        let ecu_node = || -> Result<Node, FieldError> {
-            let n = node()?;
-            if n.is_ecu() {
-                Ok(n)
-            } else {
-                Err(FieldError::new(
-                    path.key("node"),
-                    format!(
-                        "{name} rewrites the frames an ECU sends: node must be steering or throttle \
-                         (the controller's frames reach the ECUs unaltered; drop, delay or silence them instead)"
-                    ),
-                ))
-            }
-        };
-        let probability = |key: &'static str| -> Result<f64, FieldError> {
-            let p = self.probability.unwrap_or(1.0);
-            within(&path.key(key), p, 0.0, 1.0, "")?;
-            Ok(p)
-        };
-        let factor = || -> Result<f64, FieldError> {
-            let f = required(self.factor, "factor")?;
-            within(&path.key("factor"), f, 0.0, 1.0, "")?;
-            Ok(f)
-        };
-        Ok(match name {
-            "can_drop" => FaultKind::CanDrop {
-                node: node()?,
-                probability: probability("probability")?,
-            },
-            "can_silence" => FaultKind::CanSilence { node: node()? },
-            "can_delay" => {
-                let d = required(self.delay_s, "delay_s")?;
-                positive_up_to(&path.key("delay_s"), d, 10.0, "s")?;
-                FaultKind::CanDelay {
-                    node: node()?,
-                    delay_s: d,
-                }
-            }
-            "can_corrupt_crc" => FaultKind::CanCorruptCrc { node: ecu_node()? },
-            "can_counter" => FaultKind::CanCounter {
-                node: ecu_node()?,
-                mode: match self.mode.as_deref() {
-                    Some("repeat") => CounterMode::Repeat,
-                    Some("skip") => CounterMode::Skip,
-                    Some(m) => {
-                        return Err(FieldError::new(
-                            path.key("mode"),
-                            format!("{m:?} is not a counter fault: repeat or skip"),
-                        ));
-                    }
-                    None => {
-                        return Err(FieldError::new(
-                            path.key("mode"),
-                            "missing: can_counter needs mode (repeat or skip)",
-                        ));
-                    }
-                },
-            },
-            "can_dlc" => {
-                let dlc = self.dlc.ok_or_else(|| {
-                    FieldError::new(path.key("dlc"), "missing: can_dlc needs dlc (0 to 7)")
-                })?;
-                if dlc > 7 {
-                    return Err(FieldError::new(
-                        path.key("dlc"),
-                        format!(
-                            "{dlc}: every golf_car.dbc frame is 8 bytes, so a wrong DLC is 0 to 7"
-                        ),
-                    ));
-                }
-                FaultKind::CanDlc {
-                    node: ecu_node()?,
-                    dlc,
-                }
-            }
-            "can_babble" => {
-                let id = self.id.unwrap_or(0);
-                if id > 0x7ff {
-                    return Err(FieldError::new(
-                        path.key("id"),
-                        format!("{id:#x} is not an 11-bit CAN ID"),
-                    ));
-                }
-                let rate = self.rate_hz.unwrap_or(2_000.0);
-                positive_up_to(&path.key("rate_hz"), rate, 20_000.0, "Hz")?;
-                FaultKind::CanBabble { id, rate_hz: rate }
-            }
-            "can_bus_off" => FaultKind::CanBusOff,
-            "gps_outage" => FaultKind::GpsOutage,
-            "gps_quality" => FaultKind::GpsQuality {
-                fix: self.fix.ok_or_else(|| {
-                    FieldError::new(
-                        path.key("fix"),
-                        "missing: gps_quality needs fix (rtk, float, single or none)",
-                    )
-                })?,
-            },
-            "gps_jump" => {
-                let (e, n) = (
-                    required(self.east_m, "east_m")?,
-                    required(self.north_m, "north_m")?,
-                );
-                within(&path.key("east_m"), e, -1_000.0, 1_000.0, "m")?;
-                within(&path.key("north_m"), n, -1_000.0, 1_000.0, "m")?;
-                FaultKind::GpsJump {
-                    east_m: e,
-                    north_m: n,
-                }
-            }
-            "gps_heading_lost" => FaultKind::GpsHeadingLost,
-            "gps_bad_checksum" => FaultKind::GpsBadChecksum {
-                probability: probability("probability")?,
-            },
-            "gps_garbage" => {
-                let bytes = self.bytes.unwrap_or(64);
-                if !(1..=4096).contains(&bytes) {
-                    return Err(FieldError::new(
-                        path.key("bytes"),
-                        format!("{bytes}: 1 to 4096 bytes of garbage per epoch"),
-                    ));
-                }
-                FaultKind::GpsGarbage { bytes }
-            }
-            "gps_stale" => FaultKind::GpsStale,
-            "gps_baud_mismatch" => FaultKind::GpsBaudMismatch,
-            "laser_blackout" => FaultKind::LaserBlackout,
-            "laser_frozen" => FaultKind::LaserFrozen,
-            "laser_nan_storm" => FaultKind::LaserNanStorm,
-            "laser_zero_storm" => FaultKind::LaserZeroStorm,
-            "laser_occluded" => {
-                let (a, b) = (
-                    required(self.from_deg, "from_deg")?,
-                    required(self.to_deg, "to_deg")?,
-                );
-                within(&path.key("from_deg"), a, -180.0, 180.0, "degrees")?;
-                within(&path.key("to_deg"), b, -180.0, 180.0, "degrees")?;
-                if b <= a {
-                    return Err(FieldError::new(
-                        path.key("to_deg"),
-                        format!("{b} must be beyond from_deg {a} (counter-clockwise)"),
-                    ));
-                }
-                FaultKind::LaserOccluded {
-                    from_deg: a,
-                    to_deg: b,
-                }
-            }
-            "laser_phantom" => {
-                let r = required(self.range_m, "range_m")?;
-                positive_up_to(&path.key("range_m"), r, 200.0, "m")?;
-                let b = required(self.bearing_deg, "bearing_deg")?;
-                within(&path.key("bearing_deg"), b, -180.0, 180.0, "degrees")?;
-                let radius = self.radius_m.unwrap_or(0.5);
-                positive_up_to(&path.key("radius_m"), radius, 50.0, "m")?;
-                if radius >= r {
-                    return Err(FieldError::new(
-                        path.key("radius_m"),
-                        format!(
-                            "{radius} m: the phantom must lie outside the scanner (range_m {r} m)"
-                        ),
-                    ));
-                }
-                FaultKind::LaserPhantom {
-                    range_m: r,
-                    bearing_deg: b,
-                    radius_m: radius,
-                }
-            }
-            "steering_stuck" => FaultKind::SteeringStuck,
-            "steering_rate_cut" => FaultKind::SteeringRateCut { factor: factor()? },
-            "steering_offset" => {
-                let d = required(self.deg, "deg")?;
-                within(&path.key("deg"), d, -20.0, 20.0, "degrees")?;
-                FaultKind::SteeringOffset { deg: d }
-            }
-            "throttle_stuck" => FaultKind::ThrottleStuck,
-            "brake_weak" => FaultKind::BrakeWeak { factor: factor()? },
-            "ecu_fault" => FaultKind::EcuFault {
-                ecu: match self.ecu.as_deref() {
-                    Some("steering") => EcuName::Steering,
-                    Some("throttle") => EcuName::Throttle,
-                    other => {
-                        return Err(FieldError::new(
-                            path.key("ecu"),
-                            format!("{other:?}: ecu_fault needs ecu, steering or throttle"),
-                        ));
-                    }
-                },
-                code: match self.code.as_deref() {
-                    Some("overcurrent") => EcuFaultCode::Overcurrent,
-                    Some("sensor") => EcuFaultCode::Sensor,
-                    Some("internal") => EcuFaultCode::Internal,
-                    other => {
-                        return Err(FieldError::new(
-                            path.key("code"),
-                            format!(
-                                "{other:?}: ecu_fault needs code, overcurrent, sensor or internal"
-                            ),
-                        ));
-                    }
-                },
-            },
-            "driver_override" => {
-                let d = self.deg.unwrap_or(0.0);
-                within(&path.key("deg"), d, -45.0, 45.0, "degrees")?;
-                FaultKind::DriverOverride { deg: d }
-            }
-            "controller_kill" => FaultKind::ControllerKill,
-            "controller_stop" => FaultKind::ControllerStop,
-            // KINDS and this match list the same names (the plan tests build each).
-            other => {
-                return Err(FieldError::new(
-                    path.key("kind"),
-                    format!("{other} is listed but has no constructor"),
-                ));
-            }
+/// What a kind is built from: its table, its name and the table's path.
+struct KindArgs<'a> {
+    spec: &'a FaultSpec,
+    name: &'a str,
+    path: &'a FieldPath,
+}
+
+impl KindArgs<'_> {
+    /// A parameter the kind cannot do without.
+    fn required(&self, v: Option<f64>, key: &'static str) -> Result<f64, FieldError> {
+        v.ok_or_else(|| {
+            FieldError::new(
+                self.path.key(key),
+                format!("missing: {} needs {key}", self.name),
+            )
         })
     }
+
+    /// The node the kind acts on.
+    fn node(&self) -> Result<Node, FieldError> {
+        let s = self.spec.node.as_deref().ok_or_else(|| {
+            FieldError::new(
+                self.path.key("node"),
+                format!("missing: {} needs node", self.name),
+            )
+        })?;
+        Node::parse(&self.path.key("node"), s)
+    }
+
+    /// The node, which must be an ECU (the kind rewrites the frames it sends).
+    fn ecu_node(&self) -> Result<Node, FieldError> {
+        let n = self.node()?;
+        if n.is_ecu() {
+            Ok(n)
+        } else {
+            Err(FieldError::new(
+                self.path.key("node"),
+                format!(
+                    "{} rewrites the frames an ECU sends: node must be steering or throttle \
+                     (the controller's frames reach the ECUs unaltered; drop, delay or silence them instead)",
+                    self.name
+                ),
+            ))
+        }
+    }
+
+    /// `probability`, 1 when not given.
+    fn probability(&self) -> Result<f64, FieldError> {
+        let p = self.spec.probability.unwrap_or(1.0);
+        within(&self.path.key("probability"), p, 0.0, 1.0, "")?;
+        Ok(p)
+    }
+
+    /// `factor`, required, 0 to 1.
+    fn factor(&self) -> Result<f64, FieldError> {
+        let f = self.required(self.spec.factor, "factor")?;
+        within(&self.path.key("factor"), f, 0.0, 1.0, "")?;
+        Ok(f)
+    }
+}
+
+fn can_delay(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let d = a.required(a.spec.delay_s, "delay_s")?;
+    positive_up_to(&a.path.key("delay_s"), d, 10.0, "s")?;
+    Ok(FaultKind::CanDelay {
+        node: a.node()?,
+        delay_s: d,
+    })
+}
+
+fn can_counter(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let node = a.ecu_node()?;
+    let mode = match a.spec.mode.as_deref() {
+        Some("repeat") => CounterMode::Repeat,
+        Some("skip") => CounterMode::Skip,
+        Some(m) => {
+            return Err(FieldError::new(
+                a.path.key("mode"),
+                format!("{m:?} is not a counter fault: repeat or skip"),
+            ));
+        }
+        None => {
+            return Err(FieldError::new(
+                a.path.key("mode"),
+                "missing: can_counter needs mode (repeat or skip)",
+            ));
+        }
+    };
+    Ok(FaultKind::CanCounter { node, mode })
+}
+
+fn can_dlc(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let dlc = a
+        .spec
+        .dlc
+        .ok_or_else(|| FieldError::new(a.path.key("dlc"), "missing: can_dlc needs dlc (0 to 7)"))?;
+    if dlc > 7 {
+        return Err(FieldError::new(
+            a.path.key("dlc"),
+            format!("{dlc}: every golf_car.dbc frame is 8 bytes, so a wrong DLC is 0 to 7"),
+        ));
+    }
+    Ok(FaultKind::CanDlc {
+        node: a.ecu_node()?,
+        dlc,
+    })
+}
+
+fn can_babble(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let id = a.spec.id.unwrap_or(0);
+    if id > 0x7ff {
+        return Err(FieldError::new(
+            a.path.key("id"),
+            format!("{id:#x} is not an 11-bit CAN ID"),
+        ));
+    }
+    let rate = a.spec.rate_hz.unwrap_or(2_000.0);
+    positive_up_to(&a.path.key("rate_hz"), rate, 20_000.0, "Hz")?;
+    Ok(FaultKind::CanBabble { id, rate_hz: rate })
+}
+
+fn gps_quality(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let fix = a.spec.fix.ok_or_else(|| {
+        FieldError::new(
+            a.path.key("fix"),
+            "missing: gps_quality needs fix (rtk, float, single or none)",
+        )
+    })?;
+    Ok(FaultKind::GpsQuality { fix })
+}
+
+fn gps_jump(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let (e, n) = (
+        a.required(a.spec.east_m, "east_m")?,
+        a.required(a.spec.north_m, "north_m")?,
+    );
+    within(&a.path.key("east_m"), e, -1_000.0, 1_000.0, "m")?;
+    within(&a.path.key("north_m"), n, -1_000.0, 1_000.0, "m")?;
+    Ok(FaultKind::GpsJump {
+        east_m: e,
+        north_m: n,
+    })
+}
+
+fn gps_garbage(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let bytes = a.spec.bytes.unwrap_or(64);
+    if !(1..=4096).contains(&bytes) {
+        return Err(FieldError::new(
+            a.path.key("bytes"),
+            format!("{bytes}: 1 to 4096 bytes of garbage per epoch"),
+        ));
+    }
+    Ok(FaultKind::GpsGarbage { bytes })
+}
+
+fn laser_occluded(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let (from, to) = (
+        a.required(a.spec.from_deg, "from_deg")?,
+        a.required(a.spec.to_deg, "to_deg")?,
+    );
+    within(&a.path.key("from_deg"), from, -180.0, 180.0, "degrees")?;
+    within(&a.path.key("to_deg"), to, -180.0, 180.0, "degrees")?;
+    if to <= from {
+        return Err(FieldError::new(
+            a.path.key("to_deg"),
+            format!("{to} must be beyond from_deg {from} (counter-clockwise)"),
+        ));
+    }
+    Ok(FaultKind::LaserOccluded {
+        from_deg: from,
+        to_deg: to,
+    })
+}
+
+fn laser_phantom(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let r = a.required(a.spec.range_m, "range_m")?;
+    positive_up_to(&a.path.key("range_m"), r, 200.0, "m")?;
+    let b = a.required(a.spec.bearing_deg, "bearing_deg")?;
+    within(&a.path.key("bearing_deg"), b, -180.0, 180.0, "degrees")?;
+    let radius = a.spec.radius_m.unwrap_or(0.5);
+    positive_up_to(&a.path.key("radius_m"), radius, 50.0, "m")?;
+    if radius >= r {
+        return Err(FieldError::new(
+            a.path.key("radius_m"),
+            format!("{radius} m: the phantom must lie outside the scanner (range_m {r} m)"),
+        ));
+    }
+    Ok(FaultKind::LaserPhantom {
+        range_m: r,
+        bearing_deg: b,
+        radius_m: radius,
+    })
+}
+
+fn steering_offset(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let d = a.required(a.spec.deg, "deg")?;
+    within(&a.path.key("deg"), d, -20.0, 20.0, "degrees")?;
+    Ok(FaultKind::SteeringOffset { deg: d })
+}
+
+fn ecu_fault(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let ecu = match a.spec.ecu.as_deref() {
+        Some("steering") => EcuName::Steering,
+        Some("throttle") => EcuName::Throttle,
+        other => {
+            return Err(FieldError::new(
+                a.path.key("ecu"),
+                format!("{other:?}: ecu_fault needs ecu, steering or throttle"),
+            ));
+        }
+    };
+    let code = match a.spec.code.as_deref() {
+        Some("overcurrent") => EcuFaultCode::Overcurrent,
+        Some("sensor") => EcuFaultCode::Sensor,
+        Some("internal") => EcuFaultCode::Internal,
+        other => {
+            return Err(FieldError::new(
+                a.path.key("code"),
+                format!("{other:?}: ecu_fault needs code, overcurrent, sensor or internal"),
+            ));
+        }
+    };
+    Ok(FaultKind::EcuFault { ecu, code })
+}
+
+fn driver_override(a: &KindArgs<'_>) -> Result<FaultKind, FieldError> {
+    let d = a.spec.deg.unwrap_or(0.0);
+    within(&a.path.key("deg"), d, -45.0, 45.0, "degrees")?;
+    Ok(FaultKind::DriverOverride { deg: d })
 }
 
 /// What must follow the faults (`[expect]`).
