@@ -163,6 +163,29 @@ pub struct PlannerConfig {
     /// car its `max_reversals` again (a later dead end on a long route is a new one),
     /// metres.
     pub reversal_reset_m: f64,
+    /// Manoeuvres (where no polynomial path is feasible: a Hybrid A* search over the
+    /// local map, forward and backward): the clearance the car's rectangle keeps from
+    /// every obstacle, metres.
+    pub manoeuvre_margin: f64,
+    /// Speed of a manoeuvre's forward segments, m/s (its backward ones go at
+    /// `reverse_speed`).
+    pub manoeuvre_speed: f64,
+    /// Fraction of the steering limit a manoeuvre may use.
+    pub manoeuvre_steer_usage: f64,
+    /// Expansions one manoeuvre search may take (a bound on its effort that does not
+    /// depend on the machine's speed).
+    pub manoeuvre_expansions: u32,
+    /// New manoeuvres taken without `manoeuvre_progress_m` of progress along the route
+    /// past the best before; then a controlled stop (a dead end shuffled in for ever is
+    /// no way through).
+    pub max_manoeuvres: u32,
+    pub manoeuvre_progress_m: f64,
+    /// A manoeuvre backs only into space the laser has seen (it looks forward) or the
+    /// car stood in; at the start, a rectangle behind the rear bumper this deep and
+    /// `seen_behind_at_start_width_m` wide (centred) counts as seen: the operator who
+    /// starts the mission checks it, metres.
+    pub seen_behind_at_start_m: f64,
+    pub seen_behind_at_start_width_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -190,6 +213,14 @@ impl Default for PlannerConfig {
             reverse_speed: 0.5,
             max_reversals: 2,
             reversal_reset_m: 10.0,
+            manoeuvre_margin: 0.25,
+            manoeuvre_speed: 0.8,
+            manoeuvre_steer_usage: 0.8,
+            manoeuvre_expansions: 20_000,
+            max_manoeuvres: 10,
+            manoeuvre_progress_m: 1.0,
+            seen_behind_at_start_m: 2.6,
+            seen_behind_at_start_width_m: 1.2,
         }
     }
 }
@@ -483,6 +514,7 @@ impl ControllerConfig {
             ("cruise_speed", pc.cruise_speed),
             ("align_speed", pc.align_speed),
             ("reverse_speed", pc.reverse_speed),
+            ("manoeuvre_speed", pc.manoeuvre_speed),
         ] {
             up_to_max_speed(&at(k), v, max_speed)?;
         }
@@ -666,6 +698,47 @@ pub const BOUNDS: &[Bound<ControllerConfig>] = &[
     row!(
         planner.reversal_reset_m,
         Range::new(1.0, 1000.0, "m", "progress along the route")
+    ),
+    row!(planner.manoeuvre_margin, MARGIN),
+    row!(planner.manoeuvre_speed, SPEED),
+    row!(
+        planner.manoeuvre_steer_usage,
+        Range::new(0.1, 1.0, "", "a fraction of the steering limit")
+    ),
+    row!(
+        planner.manoeuvre_expansions,
+        Range::new(
+            100.0,
+            1e6,
+            "",
+            "search effort: 20,000 expansions take about 10-40 ms on a laptop core",
+        )
+    ),
+    row!(
+        planner.max_manoeuvres,
+        Range::new(1.0, 1000.0, "", "manoeuvres before a controlled stop")
+    ),
+    row!(
+        planner.manoeuvre_progress_m,
+        Range::new(0.1, 100.0, "m", "progress along the route")
+    ),
+    row!(
+        planner.seen_behind_at_start_m,
+        Range::new(
+            0.0,
+            30.0,
+            "m",
+            "what an operator checks behind the car: a car length or so"
+        )
+    ),
+    row!(
+        planner.seen_behind_at_start_width_m,
+        Range::new(
+            0.0,
+            60.0,
+            "m",
+            "what an operator checks behind the car: its width or so"
+        )
     ),
     row!(
         follower.omega,

@@ -200,9 +200,14 @@ impl Controller {
     pub fn new(cfg: &ControllerConfig) -> Result<Controller, ControllerError> {
         cfg.validate()?;
         // Walls become chains of circles sized for the least the planner inflates by:
-        // the passage margin the car's rectangle is checked with.
+        // the passage margin the car's rectangle is checked with, or the margin a
+        // manoeuvre being followed is held with.
         let mut perception = cfg.perception.clone();
-        perception.vehicle_radius = cfg.planner.passage_margin;
+        perception.vehicle_radius = cfg
+            .planner
+            .passage_margin
+            .min(cfg.planner.manoeuvre_margin - crate::guidance::manoeuvre::HOLD_SLACK)
+            .max(0.0);
         Ok(Controller {
             loc: Localiser::new(cfg)?,
             perception: Perception::new(perception)?,
@@ -470,6 +475,13 @@ impl Controller {
         match self.perception.update(scan, &mount, &at) {
             Ok(out) => {
                 self.last_scan = Some(now);
+                let (c, s) = (at.yaw.cos(), at.yaw.sin());
+                let laser = Pose2 {
+                    x: at.x + c * mount.x - s * mount.y,
+                    y: at.y + s * mount.x + c * mount.y,
+                    yaw: at.yaw + mount.yaw,
+                };
+                self.nav.observe(now, scan, &laser, [at.x, at.y, at.yaw]);
                 self.obstacles = out
                     .obstacles
                     .iter()

@@ -137,6 +137,7 @@ mod config;
 mod detect;
 mod fit;
 mod frame;
+mod seen;
 mod track;
 
 pub use cluster::cluster_points;
@@ -147,6 +148,7 @@ pub use detect::{
 };
 pub use fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
 pub use frame::{Beam, Pose2, Scan, ScanPoint, scan_points};
+pub use seen::{CELL as SEEN_CELL, SeenSpace, SeenWindow, rectangle_seen};
 pub use track::{Perception, PerceptionOutput, TrackedObstacle, WallSegment};
 
 /// Why a scan, a pose or a configuration was refused.

@@ -583,38 +583,71 @@ impl Writer {
         if let Some(state) = state {
             self.log_json(&self.state, t, &state);
         }
-        for path in plans {
-            self.plan(t, &path);
+        for planned in plans {
+            self.plan(t, &planned);
         }
     }
 
-    /// A planned path at `t`, as a line in the world frame.
-    fn plan(&self, t: f64, path: &[[f64; 2]]) {
+    /// A planned path at `t` in the world frame: the polynomial's as a green line; a
+    /// manoeuvre's forward segments orange, its backward ones magenta, and a sphere at
+    /// each cusp (entity id `plan` either way, so each replaces the last).
+    fn plan(&self, t: f64, planned: &Planned) {
         let ns = self.ns(t);
-        let green = Color {
-            r: 0.1,
-            g: 0.8,
-            b: 0.3,
-            a: 1.0,
+        let colour = |r, g, b| Color { r, g, b, a: 1.0 };
+        let line = |points: &[[f64; 2]], color: Color| LinePrimitive {
+            r#type: foxglove::schemas::line_primitive::Type::LineStrip as i32,
+            thickness: 0.1,
+            points: points
+                .iter()
+                .map(|q| Point3 {
+                    x: q[0],
+                    y: q[1],
+                    z: 0.05,
+                })
+                .collect(),
+            color: Some(color),
+            ..LinePrimitive::default()
+        };
+        let (lines, spheres) = match &planned.manoeuvre {
+            None => (vec![line(&planned.path, colour(0.1, 0.8, 0.3))], Vec::new()),
+            Some(m) => (
+                manoeuvre_spans(planned.path.len(), &m.reverse)
+                    .into_iter()
+                    .map(|(lo, hi, forward)| {
+                        let end = (hi + 1).min(planned.path.len());
+                        match forward {
+                            true => line(&planned.path[lo..end], colour(0.9, 0.47, 0.08)),
+                            false => line(&planned.path[lo..end], colour(0.78, 0.12, 0.63)),
+                        }
+                    })
+                    .collect(),
+                m.cusps
+                    .iter()
+                    .map(|c| foxglove::schemas::SpherePrimitive {
+                        pose: Some(foxglove::schemas::Pose {
+                            position: Some(foxglove::schemas::Vector3 {
+                                x: c[0],
+                                y: c[1],
+                                z: 0.1,
+                            }),
+                            orientation: None,
+                        }),
+                        size: Some(foxglove::schemas::Vector3 {
+                            x: 0.3,
+                            y: 0.3,
+                            z: 0.3,
+                        }),
+                        color: Some(colour(0.78, 0.12, 0.63)),
+                    })
+                    .collect(),
+            ),
         };
         let entity = SceneEntity {
             timestamp: Some(timestamp(ns)),
             frame_id: "world".to_owned(),
             id: "plan".to_owned(),
-            lines: vec![LinePrimitive {
-                r#type: foxglove::schemas::line_primitive::Type::LineStrip as i32,
-                thickness: 0.1,
-                points: path
-                    .iter()
-                    .map(|q| Point3 {
-                        x: q[0],
-                        y: q[1],
-                        z: 0.05,
-                    })
-                    .collect(),
-                color: Some(green),
-                ..LinePrimitive::default()
-            }],
+            lines,
+            spheres,
             ..SceneEntity::default()
         };
         self.plans.log_with_time(
@@ -662,6 +695,33 @@ impl Writer {
     }
 }
 
+/// A replanning's path as the recording shows it: the planner that made it is the
+/// manoeuvre planner when `manoeuvre` is set.
+#[derive(Clone, Debug)]
+pub struct Planned {
+    pub path: Vec<[f64; 2]>,
+    pub manoeuvre: Option<crate::guidance::ManoeuvreRecord>,
+}
+
+/// The spans of a manoeuvre's path of `n` points (first index, one past the last,
+/// forward), the backward ones `reverse` (in order, apart) and the forward ones between.
+pub fn manoeuvre_spans(n: usize, reverse: &[[usize; 2]]) -> Vec<(usize, usize, bool)> {
+    let mut all = Vec::new();
+    let mut at = 0;
+    for r in reverse {
+        let (lo, hi) = (r[0].clamp(at, n), r[1].clamp(at, n));
+        if lo > at {
+            all.push((at, lo, true));
+        }
+        all.push((lo, hi, false));
+        at = hi;
+    }
+    if at < n {
+        all.push((at, n, true));
+    }
+    all
+}
+
 /// When the controller's state is logged (on a change of mode, else every
 /// [`STATE_PERIOD`]) and which of its paths are new.
 #[derive(Debug, Default)]
@@ -673,11 +733,7 @@ struct StateCadence {
 
 impl StateCadence {
     /// The state to log at `t`, if due, and the paths planned since the last call.
-    fn take(
-        &mut self,
-        t: f64,
-        ctl: &Controller,
-    ) -> (Option<serde_json::Value>, Vec<Vec<[f64; 2]>>) {
+    fn take(&mut self, t: f64, ctl: &Controller) -> (Option<serde_json::Value>, Vec<Planned>) {
         let changed = self.last_mode.as_ref() != Some(ctl.mode());
         let state = (changed || t + 1e-9 >= self.next_state).then(|| {
             self.next_state = t + STATE_PERIOD;
@@ -695,7 +751,10 @@ impl StateCadence {
             .get(self.plans_seen..)
             .unwrap_or_default()
             .iter()
-            .map(|p| p.path.clone())
+            .map(|p| Planned {
+                path: p.path.clone(),
+                manoeuvre: p.manoeuvre.clone().filter(|m| !m.failed),
+            })
             .collect();
         self.plans_seen = plans.len();
         (state, new)
@@ -709,7 +768,7 @@ enum Entry {
     Can(f64, TapFrame),
     Json(&'static str, f64, serde_json::Value),
     State(f64, serde_json::Value),
-    Plan(f64, Vec<[f64; 2]>),
+    Plan(f64, Planned),
 }
 
 /// Entries queued for the [`BackgroundWriter`]'s thread before the loop drops them
@@ -789,8 +848,8 @@ impl BackgroundWriter {
         if let Some(state) = state {
             self.send(Entry::State(t, state));
         }
-        for path in plans {
-            self.send(Entry::Plan(t, path));
+        for planned in plans {
+            self.send(Entry::Plan(t, planned));
         }
     }
 
@@ -826,7 +885,7 @@ impl Writer {
             Entry::Can(t, f) => self.can(t, &f),
             Entry::Json(topic, t, value) => self.log_other(topic, t, &value),
             Entry::State(t, value) => self.log_json(&self.state, t, &value),
-            Entry::Plan(t, path) => self.plan(t, &path),
+            Entry::Plan(t, planned) => self.plan(t, &planned),
         }
     }
 }

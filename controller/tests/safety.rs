@@ -309,15 +309,11 @@ fn a_car_in_a_dead_end_commands_gear_reverse_and_stays_in_auto() {
             })
             .collect::<Vec<_>>()
     };
-    assert!(
-        throttle(&rig.out)
-            .iter()
-            .all(|c| c.gear == ThrottleCmdGear::Forward)
-    );
-    let from = rig.out.len();
     rig.run(1.0, 1.0 + rig.cfg.planner.recover_after_s + 1.0, ALL);
     let pc = &rig.cfg.planner;
-    let cmds = throttle(&rig.out[from..]);
+    // It backs out at once, by a manoeuvre into the space behind it its operator checked
+    // (no waiting for recovery): gear R, enabled, no brake, at most the reverse speed.
+    let cmds = throttle(&rig.out);
     let reversing: Vec<_> = cmds
         .iter()
         .filter(|c| c.gear == ThrottleCmdGear::Reverse)
@@ -326,18 +322,14 @@ fn a_car_in_a_dead_end_commands_gear_reverse_and_stays_in_auto() {
     assert!(
         reversing
             .iter()
-            .all(|c| c.enable && c.brake == 0.0 && c.target_speed == pc.reverse_speed),
+            .all(|c| c.enable && c.brake == 0.0 && c.target_speed <= pc.reverse_speed + 1e-9),
         "{reversing:?}"
     );
-    // Forward until it had stood recover_after_s with no path, then gear R.
-    let first = cmds
-        .iter()
-        .position(|c| c.gear == ThrottleCmdGear::Reverse)
-        .expect("reverse");
-    assert!(first > 0 && cmds[..first].iter().all(|c| c.target_speed == 0.0));
+    assert!(reversing.iter().any(|c| c.target_speed > 0.0));
     assert_eq!(rig.ctl.mode(), &Mode::Auto, "no watch took it for a fault");
     assert_eq!(rig.ctl.stop_reason(), None);
-    assert_eq!(rig.ctl.nav.reversals(), 1);
+    // A manoeuvre, not recovery's straight reversal.
+    assert_eq!(rig.ctl.nav.reversals(), 0);
     rig.assert_limits();
 }
 

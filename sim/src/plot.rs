@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::scenario::{Obstacle, Scenario};
@@ -34,6 +35,8 @@ pub enum PlotError {
 pub struct PlannedPath {
     pub time: f64,
     pub points: Vec<[f64; 2]>,
+    /// Made by the manoeuvre planner: its backward spans and cusps.
+    pub manoeuvre: Option<ugv_controller::guidance::ManoeuvreRecord>,
 }
 
 /// What the figure shows.
@@ -165,6 +168,63 @@ fn bounds(fig: &Figure<'_>) -> (f64, f64, f64, f64) {
     (lo_x - pad, hi_x + pad, lo_y - pad, hi_y + pad)
 }
 
+/// Manoeuvres shown at most, spread over the run.
+const MANOEUVRES_SHOWN: usize = 12;
+
+/// The manoeuvres planned (each new one, at most [`MANOEUVRES_SHOWN`]): forward
+/// segments in orange, backward ones in magenta, each cusp a cross.
+fn draw_manoeuvres<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    plans: &[PlannedPath],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let new: Vec<(&PlannedPath, &ugv_controller::guidance::ManoeuvreRecord)> = plans
+        .iter()
+        .filter_map(|p| p.manoeuvre.as_ref().map(|m| (p, m)))
+        .filter(|(_, m)| m.expansions > 0 && !m.failed)
+        .collect();
+    let forward = RGBColor(230, 120, 20);
+    let backward = RGBColor(200, 30, 160);
+    let step = new.len().div_ceil(MANOEUVRES_SHOWN).max(1);
+    for (k, (p, m)) in new.iter().step_by(step).enumerate() {
+        let all = ugv_controller::record::manoeuvre_spans(p.points.len(), &m.reverse);
+        for (lo, hi, fwd) in all {
+            // Each span joined to the next point, so the path has no gaps.
+            let end = (hi + 1).min(p.points.len());
+            let colour = if fwd { forward } else { backward };
+            let series = chart.draw_series(LineSeries::new(
+                p.points[lo..end].iter().map(|q| (q[0], q[1])),
+                colour.mix(0.8).stroke_width(2),
+            ))?;
+            if k == 0 {
+                let label = if fwd {
+                    "manoeuvre forward"
+                } else {
+                    "manoeuvre backward"
+                };
+                series
+                    .label(label)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], colour));
+            }
+        }
+        chart.draw_series(
+            m.cusps
+                .iter()
+                .map(|c| Cross::new((c[0], c[1]), 5, backward.stroke_width(2))),
+        )?;
+    }
+    Ok(())
+}
+
+/// The figure's chart: x East and y North, metres.
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A drawing error as the message [`PlotError::Draw`] carries.
+fn drawing_error<E: std::error::Error + Send + Sync>(err: DrawingAreaErrorKind<E>) -> String {
+    err.to_string()
+}
+
+/// The whole figure on `root`, within bounds `b`: the axes, then obstacles, plans,
+/// the driven path, the route, start and goal, and the legend.
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     fig: &Figure<'_>,
@@ -173,15 +233,14 @@ fn draw<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let e = |err: DrawingAreaErrorKind<DB::ErrorType>| err.to_string();
-    root.fill(&WHITE).map_err(e)?;
+    root.fill(&WHITE).map_err(drawing_error)?;
     let mut chart = ChartBuilder::on(root)
         .caption(&fig.title, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(50)
         .build_cartesian_2d(b.0..b.1, b.2..b.3)
-        .map_err(e)?;
+        .map_err(drawing_error)?;
     chart
         .configure_mesh()
         .x_desc("x (East), m")
@@ -189,21 +248,44 @@ where
         .light_line_style(RGBColor(235, 235, 235))
         .label_style(("sans-serif", 14))
         .draw()
-        .map_err(e)?;
-    let sc = fig.scenario;
-    let end_time = fig.driven.last().map_or(0.0, |d| d.0);
+        .map_err(drawing_error)?;
+    draw_obstacles(&mut chart, fig)?;
+    draw_plans(&mut chart, fig)?;
+    draw_manoeuvres(&mut chart, fig.plans).map_err(drawing_error)?;
+    draw_driven(&mut chart, fig)?;
+    draw_route(&mut chart, fig.scenario)?;
+    draw_start_and_goal(&mut chart, fig.scenario)?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(drawing_error)?;
+    root.present().map_err(drawing_error)?;
+    Ok(())
+}
 
-    // Obstacles: filled at t = 0; moving ones also outlined where they ended.
+/// Obstacles: filled at t = 0; moving ones also outlined where they ended.
+fn draw_obstacles<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    fig: &Figure<'_>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let end_time = fig.driven.last().map_or(0.0, |d| d.0);
     let obstacle_color = RGBColor(200, 80, 60);
     let mut first = true;
-    for o in &sc.obstacles {
+    for o in &fig.scenario.obstacles {
         for shape in obstacle_shapes(o, 0.0) {
             let series = chart
                 .draw_series(std::iter::once(Polygon::new(
                     shape,
                     obstacle_color.mix(0.55).filled(),
                 )))
-                .map_err(e)?;
+                .map_err(drawing_error)?;
             if first {
                 series.label("obstacle").legend(move |(x, y)| {
                     Rectangle::new(
@@ -221,13 +303,19 @@ where
                         shape,
                         obstacle_color.stroke_width(1),
                     )))
-                    .map_err(e)?;
+                    .map_err(drawing_error)?;
             }
         }
     }
+    Ok(())
+}
 
-    // Planned paths (at most 8, spread over the run) with the detection radius
-    // around the vehicle when each was made.
+/// Planned paths (at most 8, spread over the run) with the detection radius around
+/// the vehicle when each was made.
+fn draw_plans<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, fig: &Figure<'_>) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     let step = (fig.plans.len() / 8).max(1);
     let plan_color = RGBColor(40, 150, 70);
     let radius_color = RGBColor(120, 120, 200);
@@ -238,7 +326,7 @@ where
                 p.points.iter().map(|q| (q[0], q[1])),
                 plan_color.mix(0.7).stroke_width(1),
             ))
-            .map_err(e)?;
+            .map_err(drawing_error)?;
         if !labelled {
             series
                 .label("planned path (replans)")
@@ -250,7 +338,7 @@ where
                     circle_points(s.x, s.y, fig.detection_radius),
                     radius_color.mix(0.5).stroke_width(1),
                 )))
-                .map_err(e)?;
+                .map_err(drawing_error)?;
             if !labelled {
                 series
                     .label(format!("detection radius {} m", fig.detection_radius))
@@ -261,19 +349,29 @@ where
         }
         labelled = true;
     }
+    Ok(())
+}
 
-    // The driven path and footprints.
+/// The driven path and the vehicle's footprint every `footprint_every` seconds.
+fn draw_driven<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    fig: &Figure<'_>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     let path_color = RGBColor(30, 80, 200);
     chart
         .draw_series(LineSeries::new(
             fig.driven.iter().map(|(_, s)| (s.x, s.y)),
             path_color.stroke_width(3),
         ))
-        .map_err(e)?
+        .map_err(drawing_error)?
         .label("driven path (rear axle)")
         .legend(move |(x, y)| {
             PathElement::new(vec![(x, y), (x + 14, y)], path_color.stroke_width(3))
         });
+    let vehicle = &fig.scenario.vehicle;
     let mut next = 0.0;
     let mut first_fp = true;
     for (t, s) in fig.driven {
@@ -282,9 +380,9 @@ where
         }
         next = t + fig.footprint_every;
         let pts: Vec<(f64, f64)> = s
-            .footprint_corners(&sc.vehicle)
+            .footprint_corners(vehicle)
             .iter()
-            .chain(s.footprint_corners(&sc.vehicle).first())
+            .chain(s.footprint_corners(vehicle).first())
             .copied()
             .collect();
         let series = chart
@@ -292,7 +390,7 @@ where
                 pts,
                 BLACK.mix(0.6).stroke_width(1),
             )))
-            .map_err(e)?;
+            .map_err(drawing_error)?;
         if first_fp {
             series.label("footprint").legend(|(x, y)| {
                 Rectangle::new([(x, y - 4), (x + 14, y + 4)], BLACK.stroke_width(1))
@@ -300,53 +398,64 @@ where
             first_fp = false;
         }
     }
-    if !sc.waypoints.is_empty() {
-        let route: Vec<(f64, f64)> = std::iter::once((sc.start.x, sc.start.y))
-            .chain(sc.waypoints.iter().map(|w| (w.x, w.y)))
-            .chain(std::iter::once((sc.goal.x, sc.goal.y)))
-            .collect();
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                route,
-                RGBColor(0, 140, 0).mix(0.5).stroke_width(1),
-            )))
-            .map_err(e)?
-            .label("route")
-            .legend(|(x, y)| {
-                PathElement::new([(x, y), (x + 14, y)], RGBColor(0, 140, 0).stroke_width(1))
-            });
-        chart
-            .draw_series(
-                sc.waypoints
-                    .iter()
-                    .map(|w| Circle::new((w.x, w.y), 4, RGBColor(0, 140, 0).stroke_width(1))),
-            )
-            .map_err(e)?;
+    Ok(())
+}
+
+/// The route through the waypoints, when the scenario has any.
+fn draw_route<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, sc: &Scenario) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    if sc.waypoints.is_empty() {
+        return Ok(());
     }
+    let route: Vec<(f64, f64)> = std::iter::once((sc.start.x, sc.start.y))
+        .chain(sc.waypoints.iter().map(|w| (w.x, w.y)))
+        .chain(std::iter::once((sc.goal.x, sc.goal.y)))
+        .collect();
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            route,
+            RGBColor(0, 140, 0).mix(0.5).stroke_width(1),
+        )))
+        .map_err(drawing_error)?
+        .label("route")
+        .legend(|(x, y)| {
+            PathElement::new([(x, y), (x + 14, y)], RGBColor(0, 140, 0).stroke_width(1))
+        });
+    chart
+        .draw_series(
+            sc.waypoints
+                .iter()
+                .map(|w| Circle::new((w.x, w.y), 4, RGBColor(0, 140, 0).stroke_width(1))),
+        )
+        .map_err(drawing_error)?;
+    Ok(())
+}
+
+/// The start (black) and the goal (green).
+fn draw_start_and_goal<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    sc: &Scenario,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
     chart
         .draw_series([
             Circle::new((sc.start.x, sc.start.y), 6, BLACK.filled()),
             Circle::new((sc.goal.x, sc.goal.y), 6, RGBColor(0, 140, 0).filled()),
         ])
-        .map_err(e)?;
+        .map_err(drawing_error)?;
     chart
         .draw_series(std::iter::once(Circle::new(
             (sc.goal.x, sc.goal.y),
             1,
             RGBColor(0, 140, 0),
         )))
-        .map_err(e)?
+        .map_err(drawing_error)?
         .label("start (black) / goal (green)")
         .legend(|(x, y)| Circle::new((x + 7, y), 5, RGBColor(0, 140, 0).filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)?;
     Ok(())
 }
 

@@ -239,6 +239,15 @@ impl<B: Can + QueueDrops> Sim<B> {
         let now = self.tick as f64 * self.dt;
         self.tick += 1;
         self.lateness.push(late);
+        self.actuate(now);
+        self.transmit(now, wall)?;
+        self.sense(now)?;
+        Ok(self.outcome(now))
+    }
+
+    /// The ECUs take their frames (through the fault plan), step and move their
+    /// actuators; the vehicle drives on them and the world moves on.
+    fn actuate(&mut self, now: f64) {
         let faults = &mut self.faults;
         faults.update(now, self.vehicle.odometer);
         self.steering
@@ -261,6 +270,11 @@ impl<B: Can + QueueDrops> Sim<B> {
                 .step(self.scenario.vehicle.wheelbase, v, phi, self.dt);
             self.world.set_time(now);
         }
+    }
+
+    /// The ECUs' frames that are due (through the fault plan), the babble it injects,
+    /// and the bus load of the frames the bus carried.
+    fn transmit(&mut self, now: f64, wall: f64) -> Result<(), SimError> {
         let faults = &mut self.faults;
         self.steering
             .send_due_with(now, wall, &mut |_| faults.on_ecu_tx(now, Node::Steering))?;
@@ -274,6 +288,12 @@ impl<B: Can + QueueDrops> Sim<B> {
         let seen = self.steering.bus_frames();
         self.bus.step(now, seen - self.bus_frames_seen);
         self.bus_frames_seen = seen;
+        Ok(())
+    }
+
+    /// The sensors' outputs due now (through the fault plan), and the driven path.
+    fn sense(&mut self, now: f64) -> Result<(), SimError> {
+        let faults = &mut self.faults;
         if let Some(gps) = &mut self.gps {
             if !faults.is_empty() {
                 let (fix, (east, north)) = faults.gps_receiver(now);
@@ -297,7 +317,13 @@ impl<B: Can + QueueDrops> Sim<B> {
         {
             self.trajectory.push((now, self.vehicle));
         }
+        Ok(())
+    }
 
+    /// The run's outcome, when it is over now: a collision, the car safe after the
+    /// controller went away (or the wind-down's limit), the goal reached (after the
+    /// route), or the time limit.
+    fn outcome(&mut self, now: f64) -> Option<Outcome> {
         if let Some(r) = &mut self.route {
             r.update(now, self.vehicle.x, self.vehicle.y);
         }
@@ -308,10 +334,10 @@ impl<B: Can + QueueDrops> Sim<B> {
             *m = m.min(*c);
         }
         if let Some(i) = clear.iter().position(|c| *c <= 0.0) {
-            return Ok(Some(Outcome::Collision {
+            return Some(Outcome::Collision {
                 time: now,
                 obstacle: i,
-            }));
+            });
         }
         if let Some(w) = &mut self.wind_down {
             // The controller is gone: no goal counts any more; the run ends once the car
@@ -321,21 +347,21 @@ impl<B: Can + QueueDrops> Sim<B> {
             }
             let safe = self.steering.safe() && self.throttle.safe();
             if (safe && w.stopped.is_some()) || now - w.since >= WIND_DOWN_LIMIT {
-                return Ok(Some(Outcome::Stopped {
+                return Some(Outcome::Stopped {
                     time: now,
                     reason: w.reason.clone(),
-                }));
+                });
             }
         } else if self.scenario.success.reach_goal
             && self.distance_to_goal() <= self.scenario.goal.tolerance
             && self.route.as_ref().is_none_or(RouteCheck::driven)
         {
-            return Ok(Some(Outcome::GoalReached { time: now }));
+            return Some(Outcome::GoalReached { time: now });
         }
         if now >= self.scenario.sim.time_limit_s {
-            return Ok(Some(Outcome::TimeLimit { time: now }));
+            return Some(Outcome::TimeLimit { time: now });
         }
-        Ok(None)
+        None
     }
 
     /// The controller went away (`reason`): from now on the run waits for the car to

@@ -102,13 +102,20 @@ fn a_run_is_deterministic_for_a_seed() {
 #[test]
 fn an_unreachable_goal_ends_in_a_controlled_stop_not_a_collision() {
     let mut sc = Scenario::paper().expect("embedded scenario");
-    // A wall across the whole way, closer than the goal.
+    // The goal walled in on every side (a wall across the way with ends is gone round
+    // now: the manoeuvre planner looks for the way past its end).
     sc.obstacles = vec![Obstacle::Wall {
-        points: vec![[20.0, -30.0], [20.0, 40.0]],
+        points: vec![
+            [22.0, 7.0],
+            [38.0, 7.0],
+            [38.0, 23.0],
+            [22.0, 23.0],
+            [22.0, 7.0],
+        ],
         thickness: 0.3,
     }];
     sc.success.reach_goal = false;
-    sc.sim.time_limit_s = 40.0;
+    sc.sim.time_limit_s = 120.0;
     let (v, _) = verdict(&sc);
     assert!(!v.collision, "{:?}", v.report);
     assert!(matches!(v.report.outcome, Outcome::TimeLimit { .. }));
@@ -117,8 +124,10 @@ fn an_unreachable_goal_ends_in_a_controlled_stop_not_a_collision() {
         "stopped: {:?}",
         v.report.final_state
     );
+    // Manoeuvres along the walls keep the rectangle 0.25 m off them (0.15 m held): more
+    // than the tracking error leaves of it.
     assert!(
-        v.report.min_clearance[0] > 0.3,
+        v.report.min_clearance[0] > 0.1,
         "{:?}",
         v.report.min_clearance
     );
@@ -284,7 +293,13 @@ fn a_car_facing_away_from_the_goal_turns_round_and_arrives() {
     assert!(sc.start.heading_deg.abs() > 90.0);
     let cfg = controller_config(&sc, FollowerKind::Optimal);
     let run = run_sil(sc.clone(), &cfg).expect("SIL run");
-    let aligned = run.trace.plans.iter().filter(|p| p.align.is_some()).count();
+    // Turned on the circle, or by a manoeuvre round the obstacles.
+    let aligned = run
+        .trace
+        .plans
+        .iter()
+        .filter(|p| p.align.is_some() || p.manoeuvre.as_ref().is_some_and(|m| !m.failed))
+        .count();
     let v = Verdict::judge(
         Mode::Sil,
         &sc,
@@ -309,6 +324,10 @@ fn recovery_run(file: &str, max_reversals: Option<u32>) -> (Verdict, f64) {
     let mut cfg = controller_config(&sc, FollowerKind::Optimal);
     if let Some(n) = max_reversals {
         cfg.planner.max_reversals = n;
+        // Nor a manoeuvre backwards: nothing behind the car checked at the start (the
+        // laser never sees there).
+        cfg.planner.seen_behind_at_start_m = 0.0;
+        cfg.planner.seen_behind_at_start_width_m = 0.0;
     }
     let run = run_sil(sc.clone(), &cfg).expect("SIL run");
     let slowest = run
@@ -351,26 +370,32 @@ fn a_cul_de_sac_ends_in_a_controlled_stop_after_two_reversals() {
 }
 
 /// Issue 15, recovery: with no room to swerve (a cart close ahead, the nose in a dead
-/// end) the car backs off in gear R and then reaches the goal; without reversals it
-/// would stand where it started.
+/// end) the car backs off in gear R and then reaches the goal; without reversals, and
+/// nothing behind it checked, it gets out by manoeuvres that back only into seen space,
+/// or stands.
 #[test]
 fn too_close_to_swerve_the_car_backs_off_and_arrives_and_without_reversals_it_stands() {
     for file in ["51-dead-end-way-back.toml", "52-too-close-ahead.toml"] {
         let (v, slowest) = recovery_run(file, None);
         assert!(v.passed && v.goal_reached, "{file}: {:?}", v.failures);
-        let c = v.controller.expect("controller summary");
-        assert!(c.reversals >= 1, "{file}");
+        // It backed in gear R (a reversal, or a manoeuvre's backward segment).
         assert!(slowest < -0.3, "{file}: it backed: {slowest}");
         assert!(
             v.report.min_clearance.iter().all(|c| *c > 0.3),
             "{file}: {:?}",
             v.report.min_clearance
         );
-        let (stuck, slowest) = recovery_run(file, Some(0));
-        assert!(!stuck.goal_reached && !stuck.collision, "{file}");
-        assert!(slowest > -0.05, "{file}: never backed: {slowest}");
+        // With no reversal and nothing behind the car checked, it backs only into space
+        // it has seen or stood in: it finds its way out with manoeuvres, or stands in a
+        // controlled stop, never touching anything.
+        let (stuck, _) = recovery_run(file, Some(0));
+        assert!(!stuck.collision, "{file}");
         let c = stuck.controller.expect("controller summary");
         assert_eq!(c.reversals, 0);
-        assert_eq!(c.stop_reason.as_deref(), Some("no collision-free path"));
+        assert!(
+            stuck.goal_reached
+                || (c.stop_reason.is_some() && stuck.report.final_state.v.abs() < 0.05),
+            "{file}: {c:?}"
+        );
     }
 }

@@ -89,10 +89,11 @@
 
 mod align;
 mod error;
-mod follower;
+pub(crate) mod follower;
 mod footprint;
 mod frame;
 mod lanes;
+pub mod manoeuvre;
 mod pacing;
 mod reverse;
 mod search;
@@ -107,7 +108,7 @@ pub use footprint::Footprint;
 pub use frame::{Circle, PathFrame};
 pub use pacing::{Pacing, sweep};
 pub use reverse::Reverse;
-pub use solver::{Pass, PlanOutcome, PlanRecord, PlanRequest, solve};
+pub use solver::{ManoeuvreRecord, Pass, PlanOutcome, PlanRecord, PlanRequest, solve};
 
 use crate::config::ControllerConfig;
 use crate::localisation::Pose;
@@ -169,6 +170,39 @@ const YIELD_THERE: f64 = 0.6;
 const YIELD_MIN_RUN: f64 = 1.0;
 const YIELD_RUN_PER_M: f64 = 6.0;
 
+/// Seen space is marked from a scan at most this often while the car stands
+/// (seconds), and whenever it has moved this far (metres) or turned this much
+/// (radians).
+const SEEN_PERIOD: f64 = 1.0;
+const SEEN_MOVE: f64 = 1.0;
+const SEEN_TURN: f64 = 0.05;
+/// Step along a reversal at which its poses are checked against the seen space,
+/// metres.
+const SEEN_CHECK_STEP: f64 = 0.2;
+/// After a manoeuvre search that found nothing, none for this long, seconds.
+const MANOEUVRE_RETRY_S: f64 = 2.0;
+/// No manoeuvre is searched with a moving obstacle this near the car, metres.
+const MANOEUVRE_TRAFFIC_RANGE: f64 = 12.0;
+/// A manoeuvre aims this far along the route ahead (the first within reach of the
+/// route's end: the goal), metres, at these offsets sideways (left positive), metres,
+/// and at most at this many goals, each within this of it and of the route's heading
+/// (metres, radians).
+const MANOEUVRE_AHEAD: [f64; 4] = [8.0, 11.0, 5.0, 14.0];
+const MANOEUVRE_OFFSETS: [f64; 5] = [0.0, 1.0, -1.0, 2.0, -2.0];
+const MANOEUVRE_GOALS: usize = 3;
+const MANOEUVRE_GOAL_XY: f64 = 0.5;
+const MANOEUVRE_GOAL_HEADING: f64 = 0.35;
+
+/// The way back, as the last try at recovery found it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum WayBack {
+    Open,
+    /// Obstacles on every reversal.
+    Blocked,
+    /// A reversal clear of the obstacles, into space the laser has not seen.
+    Unseen,
+}
+
 /// Replanning and following.
 #[derive(Debug)]
 pub struct Navigator {
@@ -205,10 +239,25 @@ pub struct Navigator {
     recent_reversals: u32,
     /// Route progress where the last reversal began, metres.
     reversed_at: f64,
-    /// The last try at recovery found no clear way back.
-    no_way_back: bool,
+    /// What the last try at recovery found behind the car.
+    no_way_back: WayBack,
     /// Replannings taken ([`Navigator::accept`]), dropped ones included.
     accepted: u64,
+    /// The manoeuvre being followed (the polynomial had no path).
+    manoeuvre: Option<manoeuvre::Following>,
+    /// New manoeuvres taken since the car last made `manoeuvre_progress_m` of progress
+    /// past `manoeuvre_best` (the most progress since then); past `max_manoeuvres`, no
+    /// more are taken.
+    manoeuvres: u32,
+    manoeuvre_best: f64,
+    /// When a manoeuvre search last found nothing: none is searched again for
+    /// [`MANOEUVRE_RETRY_S`] (a car standing in a dead end would search at every
+    /// replanning).
+    search_failed_at: Option<f64>,
+    /// Space the laser has seen free, or the car stood in: manoeuvres back only into it.
+    seen: crate::perception::SeenSpace,
+    /// When and from where `seen` was last marked.
+    seen_at: Option<(f64, [f64; 3])>,
     pub plans: Vec<PlanRecord>,
 }
 
@@ -236,8 +285,14 @@ impl Navigator {
             reversals: 0,
             recent_reversals: 0,
             reversed_at: 0.0,
-            no_way_back: false,
+            no_way_back: WayBack::Open,
             accepted: 0,
+            manoeuvre: None,
+            manoeuvres: 0,
+            manoeuvre_best: 0.0,
+            search_failed_at: None,
+            seen: crate::perception::SeenSpace::default(),
+            seen_at: None,
             plans: Vec::new(),
         })
     }
@@ -489,6 +544,7 @@ impl Navigator {
             obstacles: obstacles.to_vec(),
         });
         let yields = self.yields(now, pose, obstacles, s, &problem);
+        let manoeuvre = self.manoeuvre_request(now, pose, obstacles, s, align.is_some());
         PlanRequest {
             time: now,
             problem,
@@ -503,7 +559,113 @@ impl Navigator {
             align,
             current_holds: self.current_path_holds(pose, obstacles),
             yields,
+            manoeuvre,
+            hand_back: self
+                .manoeuvre
+                .as_ref()
+                .is_some_and(manoeuvre::Following::on_last_forward),
         }
+    }
+
+    /// The manoeuvre search from `pose` at progress `s` at `now` ([`manoeuvre`]), or
+    /// the check of the manoeuvre being followed; none with a moving obstacle within
+    /// [`MANOEUVRE_TRAFFIC_RANGE`] of the car (traffic is given way to, not
+    /// manoeuvred round), nor within [`MANOEUVRE_RETRY_S`] of a search that found
+    /// nothing, nor once `max_manoeuvres` are spent without progress.
+    fn manoeuvre_request(
+        &self,
+        now: f64,
+        pose: &Pose,
+        obstacles: &[Circle],
+        s: f64,
+        turning: bool,
+    ) -> Option<manoeuvre::ManoeuvreRequest> {
+        let traffic = obstacles.iter().any(|o| {
+            (o.vx != 0.0 || o.vy != 0.0)
+                && (o.x - pose.x).hypot(o.y - pose.y) < MANOEUVRE_TRAFFIC_RANGE
+        });
+        // Built only when one may be needed (a manoeuvre followed, the last replanning
+        // without a path, the car heading too far from the line: `turning`): the request
+        // is made on the command loop, and copying the seen space costs (a dead end
+        // found while driving waits one replanning).
+        let needed = self.manoeuvre.is_some() || self.infeasible_since.is_some() || turning;
+        let resting = !needed
+            || self.manoeuvre.is_none()
+                && (self.manoeuvres_spent()
+                    || self
+                        .search_failed_at
+                        .is_some_and(|t| now - t < MANOEUVRE_RETRY_S));
+        if traffic || resting {
+            return None;
+        }
+        let pc = &self.cfg.planner;
+        let v = &self.cfg.vehicle;
+        let limit = (v.max_steer_deg * pc.manoeuvre_steer_usage).to_radians();
+        let footprint = Footprint {
+            margin: pc.manoeuvre_margin,
+            ..self.footprint()
+        };
+        Some(
+            manoeuvre::ManoeuvreRequest {
+                start: [pose.x, pose.y, pose.theta],
+                goals: self.manoeuvre_goals(s, &footprint, obstacles),
+                obstacles: obstacles.to_vec(),
+                footprint,
+                settings: manoeuvre::Settings {
+                    turn_radius: v.wheelbase / limit.tan(),
+                    max_expansions: pc.manoeuvre_expansions as usize,
+                    ..manoeuvre::Settings::default()
+                },
+                following: self.manoeuvre.as_ref().map(manoeuvre::Following::rest),
+                seen: None,
+                remembered: Vec::new(),
+            }
+            .with_seen(&self.seen),
+        )
+    }
+
+    /// Where a manoeuvre from progress `s` aims: the goal once within reach (anywhere in
+    /// its tolerance, any heading), else poses on the route ahead at the route's
+    /// heading, a few distances and offsets sideways, those the car's rectangle clears
+    /// (at most [`MANOEUVRE_GOALS`]).
+    fn manoeuvre_goals(
+        &self,
+        s: f64,
+        footprint: &Footprint,
+        obstacles: &[Circle],
+    ) -> Vec<manoeuvre::Goal> {
+        let left = self.route.length() - s;
+        let m = &self.cfg.mission;
+        if left <= MANOEUVRE_AHEAD[0] {
+            return vec![manoeuvre::Goal {
+                pose: [
+                    m.goal_x,
+                    m.goal_y,
+                    self.route.at(self.route.length()).heading,
+                ],
+                tol_xy: m.goal_tolerance * 0.8,
+                tol_theta: std::f64::consts::PI,
+            }];
+        }
+        let statics: Vec<planner::Obstacle> = obstacles.iter().map(Into::into).collect();
+        let mut goals = Vec::new();
+        for ahead in MANOEUVRE_AHEAD {
+            for offset in MANOEUVRE_OFFSETS {
+                let p = self.route.at((s + ahead).min(self.route.length()));
+                let (c, sn) = (p.heading.cos(), p.heading.sin());
+                let pose = [p.x - offset * sn, p.y + offset * c, p.heading];
+                if goals.len() < MANOEUVRE_GOALS
+                    && footprint.clear_at(pose[0], pose[1], pose[2], &statics)
+                {
+                    goals.push(manoeuvre::Goal {
+                        pose,
+                        tol_xy: MANOEUVRE_GOAL_XY,
+                        tol_theta: MANOEUVRE_GOAL_HEADING,
+                    });
+                }
+            }
+        }
+        goals
     }
 
     /// What the moving obstacles of the local goal's `problem` do ([`pacing::traffic`],
@@ -659,11 +821,22 @@ impl Navigator {
             return;
         }
         match outcome.result {
-            Ok((trajectory, record)) => {
-                if trajectory.is_some() {
+            Ok((trajectory, mut record)) => {
+                let plan = record.manoeuvre.as_mut().and_then(|m| m.plan.take());
+                let failed = record.manoeuvre.as_ref().is_some_and(|m| m.failed);
+                // The manoeuvre being followed holds (a record without a new one).
+                let holds = record.kept && plan.is_none() && record.manoeuvre.is_some() && !failed;
+                if trajectory.is_some() || holds || plan.is_some() {
                     self.infeasible_since = None;
                 } else {
                     self.infeasible_since.get_or_insert(outcome.time);
+                }
+                if failed {
+                    self.search_failed_at = Some(outcome.time);
+                }
+                if !holds {
+                    // A polynomial path, none, or a new manoeuvre: not the one followed.
+                    self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m));
                 }
                 if !record.kept {
                     self.frame = outcome.frame;
@@ -680,10 +853,33 @@ impl Navigator {
             Err(e) => {
                 self.frame = outcome.frame;
                 self.active = None;
+                self.manoeuvre = None;
                 self.aligning = None;
                 self.planner_error = Some(e);
             }
         }
+    }
+
+    /// A new manoeuvre to follow, counted against `max_manoeuvres` since the last
+    /// progress; None once they are spent.
+    fn count_manoeuvre(&mut self, m: manoeuvre::Manoeuvre) -> Option<manoeuvre::Following> {
+        let pc = &self.cfg.planner;
+        if self.progress >= self.manoeuvre_best + pc.manoeuvre_progress_m {
+            self.manoeuvres = 0;
+            self.manoeuvre_best = self.progress;
+        }
+        if self.manoeuvres >= pc.max_manoeuvres {
+            return None;
+        }
+        self.manoeuvres += 1;
+        Some(manoeuvre::Following::new(m))
+    }
+
+    /// Whether the manoeuvres allowed without progress are spent.
+    fn manoeuvres_spent(&self) -> bool {
+        let pc = &self.cfg.planner;
+        self.manoeuvres >= pc.max_manoeuvres
+            && self.progress < self.manoeuvre_best + pc.manoeuvre_progress_m
     }
 
     /// Reversals begun this mission.
@@ -715,6 +911,7 @@ impl Navigator {
         }
         // A blocked goal is no dead end: backing away from it leads nowhere nearer.
         let stuck = self.active.is_none()
+            && self.manoeuvre.is_none()
             && !self.goal_blocked
             && self.aligning.is_none()
             && self.planner_error.is_none()
@@ -741,16 +938,99 @@ impl Navigator {
         ) {
             // Traffic behind the car or on its way: wait for it, never back into it.
             Some(r) if !r.clear_of_traffic(obstacles, r0, speed) => {}
+            // Never back into space the laser has not seen.
+            Some(r) if !self.reverse_seen(&r) => self.no_way_back = WayBack::Unseen,
             Some(r) => {
                 self.reversing = Some(r);
                 self.reversals += 1;
                 self.recent_reversals += 1;
                 self.reversed_at = s;
                 self.infeasible_since = None;
-                self.no_way_back = false;
+                self.no_way_back = WayBack::Open;
             }
-            None => self.no_way_back = true,
+            None => self.no_way_back = WayBack::Blocked,
         }
+    }
+
+    /// Mark what a scan saw free ([`crate::perception::SeenSpace`]), the laser at `laser`
+    /// and the car at `car` (world frame) at `now`, and the car's rectangle; at most
+    /// every [`SEEN_PERIOD`] while the car stands. The first time, the rectangle
+    /// behind the car its operator checked (`seen_behind_at_start_m` deep,
+    /// `seen_behind_at_start_width_m` wide) too.
+    pub fn observe(
+        &mut self,
+        now: f64,
+        scan: &crate::perception::Scan<'_>,
+        laser: &crate::perception::Pose2,
+        car: [f64; 3],
+    ) {
+        let moved = self.seen_at.is_none_or(|(t, p)| {
+            now - t >= SEEN_PERIOD
+                || (car[0] - p[0]).hypot(car[1] - p[1]) >= SEEN_MOVE
+                || wrap(car[2] - p[2]).abs() >= SEEN_TURN
+        });
+        if !moved {
+            return;
+        }
+        let f = self.footprint();
+        if self.seen_at.is_none() {
+            let pc = &self.cfg.planner;
+            let (depth, width) = (pc.seen_behind_at_start_m, pc.seen_behind_at_start_width_m);
+            self.seen
+                .mark_rectangle(car, f.rear + depth, -f.rear, width / 2.0);
+        }
+        self.seen.mark_rectangle(car, f.rear, f.front, f.half_width);
+        self.seen.update(scan, laser);
+        self.seen_at = Some((now, car));
+    }
+
+    /// Follow the manoeuvre, if one is followed: forward segments as a drive, backward
+    /// ones as a reversal; once it is driven to its end, a replanning is due at once.
+    fn follow_manoeuvre(&mut self, pose: &Pose, ahead: &Pose) -> Option<Guidance> {
+        let following = self.manoeuvre.as_mut()?;
+        let pc = &self.cfg.planner;
+        let v = &self.cfg.vehicle;
+        let pace = manoeuvre::follow::Pace {
+            forward_speed: pc.manoeuvre_speed.min(v.max_speed),
+            reverse_speed: pc.reverse_speed.min(v.max_speed),
+            decel: self.cfg.follower.decel,
+            coast: v.coast_m(pose.v.abs()),
+            wheelbase: v.wheelbase,
+        };
+        let Some(c) = following.command(pose, ahead, &self.law, &pace) else {
+            self.manoeuvre = None;
+            self.next_replan = 0.0;
+            return None;
+        };
+        Some(if c.forward {
+            Guidance::Drive {
+                steer: c.steer,
+                speed: c.speed,
+                room: c.room,
+                inputs: c.inputs,
+            }
+        } else {
+            Guidance::Reverse {
+                steer: c.steer,
+                speed: c.speed,
+            }
+        })
+    }
+
+    /// Whether the car's rectangle stays in seen space all along the reversal `r`.
+    fn reverse_seen(&self, r: &Reverse) -> bool {
+        let f = self.footprint();
+        let n = (r.distance / SEEN_CHECK_STEP).ceil().max(1.0) as usize;
+        (1..=n).all(|j| {
+            let (x, y, theta) = r.pose_at(r.distance * j as f64 / n as f64);
+            crate::perception::rectangle_seen(
+                |x, y| self.seen.seen(x, y),
+                [x, y, theta],
+                f.front,
+                f.rear,
+                f.half_width,
+            )
+        })
     }
 
     /// Follow the current path from `pose` (no planning).
@@ -800,6 +1080,9 @@ impl Navigator {
                 reason: format!("planner: {e}"),
             };
         }
+        if let Some(g) = self.follow_manoeuvre(pose, ahead) {
+            return g;
+        }
         let pose = ahead;
         let (px, py) = self.frame.to_path(pose.x, pose.y);
         if let Some(steer) = self.aligning {
@@ -822,14 +1105,21 @@ impl Navigator {
                 format!(
                     "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
                 )
+            } else if self.manoeuvres_spent() {
+                format!(
+                    "no way through: {} manoeuvres without {} m of progress",
+                    self.manoeuvres, pc.manoeuvre_progress_m
+                )
             } else if self.recent_reversals > 0 && self.recent_reversals >= pc.max_reversals {
                 let n = self.recent_reversals;
                 format!(
                     "no forward path after {n} reversal{}",
                     if n == 1 { "" } else { "s" }
                 )
-            } else if self.no_way_back {
+            } else if self.no_way_back == WayBack::Blocked {
                 "no forward path, and no clear way back".to_owned()
+            } else if self.no_way_back == WayBack::Unseen {
+                "no forward path, and no way back the laser has seen (it looks forward)".to_owned()
             } else {
                 "no collision-free path".to_owned()
             };
@@ -949,6 +1239,8 @@ mod tests {
         req.steer_limit = 1e-6;
         req.detours.clear();
         req.passages.clear();
+        // The polynomial alone: what it keeps when it finds nothing.
+        req.manoeuvre = None;
         solve(&req)
     }
 
@@ -1406,7 +1698,10 @@ mod tests {
         // The line points at 26.6 degrees; the car at 170 degrees (143 off, to the
         // left): the short way round is a right turn.
         let pose = car_at(0.0, 0.0, 170f64.to_radians(), 0.0);
-        let req = nav.request(0.0, &pose, &[]);
+        let mut req = nav.request(0.0, &pose, &[]);
+        // Turning on the circle is what is left when no manoeuvre is found.
+        assert!(req.manoeuvre.is_some());
+        req.manoeuvre = None;
         let align = req.align.clone().expect("align");
         assert!(!align.prefer_left);
         nav.accept(solve(&req));
@@ -1475,6 +1770,13 @@ mod tests {
         (cfg, wall)
     }
 
+    /// The navigator with 60 m x 60 m round the origin seen free (as if the laser had
+    /// looked round): reversals are checked against the obstacles alone.
+    pub(super) fn seen_round(mut nav: Navigator) -> Navigator {
+        nav.seen.mark_rectangle([0.0, 0.0, 0.0], 30.0, 30.0, 30.0);
+        nav
+    }
+
     /// Replan at `now` from `pose` when due, recover, follow: as the core's tick does.
     fn tick(nav: &mut Navigator, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
         if nav.replan_due(now, pose) {
@@ -1489,7 +1791,7 @@ mod tests {
     fn a_car_facing_a_wall_reverses_a_bounded_number_of_times_then_stops_with_the_reason() {
         let (cfg, wall) = dead_end(4.5);
         let pc = &cfg.planner;
-        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut nav = seen_round(Navigator::new(&cfg).expect("navigator"));
         let mut pose = car_at(0.0, 0.0, 0.0, 0.0);
         let mut now = 0.0;
         for round in 1..=pc.max_reversals {
@@ -1582,7 +1884,7 @@ mod tests {
         // A second wall 4 m behind the car: backing up would hit it.
         let (_, behind) = dead_end(-4.0);
         walls.extend(behind);
-        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut nav = seen_round(Navigator::new(&cfg).expect("navigator"));
         let pose = car_at(0.0, 0.0, 0.0, 0.0);
         for k in 0..300 {
             let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &walls);
@@ -1597,7 +1899,7 @@ mod tests {
         );
         // The wall behind shows up only once the car backs: it brakes at once.
         let (_, ahead) = dead_end(4.5);
-        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let mut nav = seen_round(Navigator::new(&cfg).expect("navigator"));
         let mut now = 0.0;
         while !matches!(tick(&mut nav, now, &pose, &ahead), Guidance::Reverse { .. }) {
             now += 0.01;
@@ -1618,6 +1920,19 @@ mod tests {
             nav.follow(&backing),
             Guidance::Reverse { speed: 0.0, .. }
         ));
+        // Nothing seen behind the car (the laser looks forward): it never backs up.
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        for k in 0..300 {
+            let g = tick(&mut nav, f64::from(k) * 0.01, &pose, &ahead);
+            assert!(matches!(g, Guidance::Stop { .. }), "{g:?}");
+        }
+        assert_eq!(
+            nav.follow(&pose),
+            Guidance::Stop {
+                reason: "no forward path, and no way back the laser has seen (it looks forward)"
+                    .to_owned()
+            }
+        );
         // A car that is merely moving when its path goes infeasible does not reverse.
         let mut nav = Navigator::new(&cfg).expect("navigator");
         let rolling = Pose { v: 0.5, ..pose };
@@ -1791,9 +2106,10 @@ mod tests {
         }
         // A gate narrower than the car plus the margin on each side: no path.
         let narrow = fence(cfg.vehicle.width + 0.2, cfg.planner.passage_margin);
-        let (trajectory, record) = solve(&nav.request(0.0, &pose, &narrow))
-            .result
-            .expect("planned");
+        let mut req = nav.request(0.0, &pose, &narrow);
+        // The polynomial's passages alone (a manoeuvre would close in on the gate).
+        req.manoeuvre = None;
+        let (trajectory, record) = solve(&req).result.expect("planned");
         assert!(trajectory.is_none() && !record.feasible, "{record:?}");
     }
 

@@ -7,6 +7,7 @@ use super::error::ReplanError;
 use super::footprint::Footprint;
 use super::frame::PathFrame;
 use super::lanes::{self, Lanes};
+use super::manoeuvre::{Field, Manoeuvre, ManoeuvreRequest, Planned};
 use super::pacing::{Pacing, sweep};
 use crate::planner::{self, Interval, Obstacle, PlanOptions, PlanProblem, Trajectory};
 
@@ -61,6 +62,57 @@ pub struct PlanRecord {
     /// is eased into at the follower's deceleration.
     #[serde(default)]
     pub narrow_ahead: bool,
+    /// Made by the manoeuvre planner (no polynomial path was feasible): its segments
+    /// and cusps; `path` is the manoeuvre's. None for the paper's polynomial.
+    #[serde(default)]
+    pub manoeuvre: Option<ManoeuvreRecord>,
+}
+
+/// A manoeuvre in a replanning's record.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ManoeuvreRecord {
+    /// Expansions the search took (0: the manoeuvre being followed was kept).
+    pub expansions: usize,
+    /// It reaches its goal; else it goes as far towards it as what the car knows
+    /// allows, and the search goes on from there.
+    #[serde(default)]
+    pub complete: bool,
+    /// The search found none (`path` is empty).
+    #[serde(default)]
+    pub failed: bool,
+    /// Where the car changes direction, world frame.
+    pub cusps: Vec<[f64; 2]>,
+    /// The spans of `path` (first index, one past the last) driven backwards.
+    pub reverse: Vec<[usize; 2]>,
+    /// The manoeuvre itself, for the navigator to follow (not in the trace: `path`,
+    /// `reverse` and `cusps` say what it is).
+    #[serde(skip)]
+    pub plan: Option<Manoeuvre>,
+}
+
+impl ManoeuvreRecord {
+    fn new(m: Manoeuvre, expansions: usize, complete: bool) -> ManoeuvreRecord {
+        let segments = m.segments();
+        ManoeuvreRecord {
+            expansions,
+            complete,
+            failed: false,
+            cusps: segments
+                .iter()
+                .skip(1)
+                .map(|r| {
+                    let p = &m.points[r.start - 1];
+                    [p.x, p.y]
+                })
+                .collect(),
+            reverse: segments
+                .iter()
+                .filter(|r| !m.points[r.start].forward)
+                .map(|r| [r.start, r.end])
+                .collect(),
+            plan: Some(m),
+        }
+    }
 }
 
 /// Passing slower traffic going the car's way: problems towards local goals on a lane
@@ -108,6 +160,12 @@ pub struct PlanRequest {
     /// among static obstacles, the car on it, and the rest of it clear of every
     /// obstacle now reported (`Navigator::current_path_holds`).
     pub current_holds: bool,
+    /// The manoeuvre planner's search, when no polynomial path is feasible, or the
+    /// check of the manoeuvre being followed; None with traffic near the car.
+    pub manoeuvre: Option<ManoeuvreRequest>,
+    /// The manoeuvre being followed is on its last segment, forward: a feasible
+    /// polynomial path takes over from it.
+    pub hand_back: bool,
 }
 
 /// A finished replanning: the path (None when no feasible path exists) and its
@@ -136,6 +194,104 @@ pub struct PlanOutcome {
 /// ([`PlanRequest::passages`], whose paths must also clear the car's rectangle), and
 /// the first with one is taken, in its own frame ([`PlanOutcome::frame`]).
 pub fn solve(req: &PlanRequest) -> PlanOutcome {
+    if let Some(m) = &req.manoeuvre
+        && m.following.is_some()
+    {
+        return solve_following(req, m);
+    }
+    // Turning towards the line first is more turning than the polynomial allows: a
+    // manoeuvre, where one is found, does it round the obstacles ([`Align`] turns on
+    // the spot's circle only).
+    if req.align.is_some()
+        && let Some(m) = &req.manoeuvre
+        && let Ok(found) = manoeuvre(req, m, &m.field())
+    {
+        return found;
+    }
+    let mut outcome = solve_polynomial(req);
+    let stuck = matches!(&outcome.result, Ok((None, r))
+        if !r.kept && !r.goal_blocked && r.align.is_none());
+    if stuck && let Some(m) = &req.manoeuvre {
+        match manoeuvre(req, m, &m.field()) {
+            Ok(found) => return found,
+            Err(failed) => failed_search(&mut outcome, failed),
+        }
+    }
+    outcome
+}
+
+/// The polynomial's `outcome` with the record of a manoeuvre search that found none.
+fn failed_search(outcome: &mut PlanOutcome, failed: ManoeuvreRecord) {
+    if let Ok((_, r)) = &mut outcome.result {
+        r.manoeuvre = Some(failed);
+    }
+}
+
+/// [`solve`] while a manoeuvre is followed: kept while the car's rectangle clears the
+/// rest of it (on its last segment forward, a feasible polynomial path takes over);
+/// else searched anew from where the car is, and with none found, the polynomial's
+/// outcome.
+fn solve_following(req: &PlanRequest, m: &ManoeuvreRequest) -> PlanOutcome {
+    if m.following_holds() {
+        if req.hand_back {
+            let outcome = solve_polynomial(req);
+            if matches!(&outcome.result, Ok((Some(_), r)) if !r.passage) {
+                return outcome;
+            }
+        }
+        let (_, mut record) = record(req.time, &req.frame, None, false);
+        record.kept = true;
+        record.feasible = true;
+        record.manoeuvre = Some(ManoeuvreRecord::default());
+        return PlanOutcome {
+            time: req.time,
+            frame: req.frame,
+            result: Ok((None, record)),
+        };
+    }
+    manoeuvre(req, m, &m.field()).unwrap_or_else(|failed| {
+        let mut outcome = solve_polynomial(req);
+        if let Ok((_, r)) = &mut outcome.result {
+            r.kept = false;
+        }
+        failed_search(&mut outcome, failed);
+        outcome
+    })
+}
+
+/// A manoeuvre search: the outcome with it, or the record of a search that found none.
+fn manoeuvre(
+    req: &PlanRequest,
+    m: &ManoeuvreRequest,
+    field: &Field,
+) -> Result<PlanOutcome, ManoeuvreRecord> {
+    let (found, expansions) = m.plan(field);
+    let Ok(Planned {
+        manoeuvre: plan,
+        complete,
+    }) = found
+    else {
+        return Err(ManoeuvreRecord {
+            expansions,
+            failed: true,
+            ..ManoeuvreRecord::default()
+        });
+    };
+    let (_, mut record) = record(req.time, &req.frame, None, false);
+    record.feasible = true;
+    record.goal_blocked = req.goal_blocked;
+    record.path = plan.points.iter().map(|p| [p.x, p.y]).collect();
+    record.manoeuvre = Some(ManoeuvreRecord::new(plan, expansions, complete));
+    Ok(PlanOutcome {
+        time: req.time,
+        frame: req.frame,
+        result: Ok((None, record)),
+    })
+}
+
+/// The paper's polynomial: [`solve_in_order`], and whether the path being followed is
+/// kept when it finds none.
+fn solve_polynomial(req: &PlanRequest) -> PlanOutcome {
     let mut outcome = solve_in_order(req);
     if let Ok((trajectory, record)) = &mut outcome.result {
         record.goal_blocked = req.goal_blocked;
@@ -677,6 +833,7 @@ fn record(
         escape: false,
         yielding: false,
         narrow_ahead: false,
+        manoeuvre: None,
     };
     (chosen.map(|c| c.trajectory), record)
 }

@@ -78,6 +78,16 @@ pub const SCENARIO: &[Bound<Scenario>] = &[
             "perception's detection radius, at most 100 m; the LMS291 reaches 80 m",
         ),
     },
+    Bound {
+        field: &["controller", "seen_behind_m"],
+        value: |s| s.controller.seen_behind_m,
+        range: Range::new(0.0, 30.0, "m", "what an operator checks behind the car"),
+    },
+    Bound {
+        field: &["controller", "seen_behind_width_m"],
+        value: |s| s.controller.seen_behind_width_m,
+        range: Range::new(0.0, 60.0, "m", "what an operator checks behind the car"),
+    },
     row!(Scenario, car::WHEELBASE, vehicle.wheelbase),
     row!(Scenario, car::LENGTH, vehicle.length),
     row!(Scenario, car::WIDTH, vehicle.width),

@@ -272,4 +272,9 @@ pub struct ControllerTuning {
     /// Perception's detection radius, metres (default: the controller's 8 m, the
     /// paper's); up to the laser's range.
     pub detection_radius: Option<f64>,
+    /// The space behind the car its operator checked clear at the start, depth and
+    /// width, metres (default: the controller's 2.6 m by 1.2 m); the car backs only
+    /// into space its forward-looking laser has seen, or this.
+    pub seen_behind_m: Option<f64>,
+    pub seen_behind_width_m: Option<f64>,
 }

@@ -1,0 +1,222 @@
+//! The manoeuvre planner: where the paper's polynomial family has no path (a gate right
+//! after a corner, a gap in a row of parked carts, a hairpin, turning round, backing
+//! out of a nose-in spot), a Hybrid A* search over the local map finds a path of arcs
+//! forward and backward, with cusps, that the car's rectangle clears ([`hybrid`],
+//! [`field`]); it is smoothed ([`path`]) and followed segment by segment ([`follow`]),
+//! and the polynomial takes over again once the way ahead is open
+//! (`super::Navigator`).
+//!
+//! The search runs in the replanning (`super::solve`): on the planning thread in the
+//! binary, so the command loop keeps its rhythm; inline in SIL, bounded by a number of
+//! expansions, so a run is deterministic for a seed.
+
+pub mod curves;
+pub mod field;
+pub mod follow;
+pub mod hybrid;
+pub mod path;
+
+pub use field::{Disc, Field};
+pub use follow::Following;
+pub use hybrid::{Failure, Goal, Settings};
+pub use path::{Manoeuvre, PathPoint};
+
+use super::footprint::Footprint;
+use super::frame::Circle;
+use crate::perception::{SeenSpace, SeenWindow};
+
+/// An obstacle within the margin of the car where it stands is shrunk to this much
+/// clear of it, metres.
+const START_SLACK: f64 = 0.05;
+/// Cell of the distance field, metres.
+const FIELD_RES: f64 = 0.1;
+/// The field's window reaches this far round the start and the goals, metres.
+const WINDOW_MARGIN: f64 = 10.0;
+/// Moving obstacles are planned as swept along their velocity over this long, seconds,
+/// every this many metres.
+const SWEEP_S: f64 = 3.0;
+const SWEEP_STEP: f64 = 0.3;
+/// A manoeuvre is searched anew once the car is this far off the one it follows
+/// (among its first this many samples), metres.
+const OFF_PATH: f64 = 0.3;
+const OFF_PATH_LOOK: usize = 20;
+/// The manoeuvre being followed is kept while it clears every obstacle by the margin
+/// less this, metres.
+pub const HOLD_SLACK: f64 = 0.1;
+
+/// One manoeuvre search: from the car's pose to the first of `goals` it reaches, among
+/// the obstacles, the car's rectangle grown by the manoeuvre margin.
+#[derive(Clone, Debug)]
+pub struct ManoeuvreRequest {
+    pub start: [f64; 3],
+    /// Goals to try, in order.
+    pub goals: Vec<Goal>,
+    pub obstacles: Vec<Circle>,
+    pub footprint: Footprint,
+    pub settings: Settings,
+    /// The manoeuvre being followed, from the pose it has reached: kept while the
+    /// rectangle clears all of it.
+    pub following: Option<Manoeuvre>,
+    /// The space seen free over the field's window: backward motion only into it (None:
+    /// everywhere, as in tests of the search alone).
+    pub seen: Option<SeenWindow>,
+    /// The cells beams returned from in the window ([`SeenSpace::hits_in`]): obstacles
+    /// the laser saw that may be out of its view now, each a disc over its cell.
+    pub remembered: Vec<[f64; 2]>,
+}
+
+/// The obstacles as discs: static ones as they are, moving ones swept along their
+/// velocity over [`SWEEP_S`] (never back into one's way, nor in front of it).
+pub fn discs(obstacles: &[Circle]) -> Vec<Disc> {
+    let mut out = Vec::with_capacity(obstacles.len());
+    for o in obstacles {
+        let speed = o.vx.hypot(o.vy);
+        let n = (speed * SWEEP_S / SWEEP_STEP).ceil() as usize;
+        out.extend((0..=n).map(|k| {
+            let t = if n == 0 {
+                0.0
+            } else {
+                SWEEP_S * k as f64 / n as f64
+            };
+            Disc {
+                x: o.x + o.vx * t,
+                y: o.y + o.vy * t,
+                r: o.radius,
+            }
+        }));
+    }
+    out
+}
+
+impl ManoeuvreRequest {
+    /// The request with the seen space over its window.
+    pub fn with_seen(self, seen: &SeenSpace) -> ManoeuvreRequest {
+        let (lo, hi) = self.window();
+        ManoeuvreRequest {
+            seen: Some(seen.window(lo, hi)),
+            remembered: seen.hits_in(lo, hi),
+            ..self
+        }
+    }
+
+    /// The distance field round the start and the goals (and the manoeuvre being
+    /// followed).
+    pub fn field(&self) -> Field {
+        let (lo, hi) = self.window();
+        // An obstacle the car already stands within the margin of is planned as just
+        // clear of where it stands (as the passages' check does), so a manoeuvre may lead
+        // away from it.
+        let [x, y, theta] = self.start;
+        let f = &self.footprint;
+        let cell = crate::perception::SEEN_CELL * std::f64::consts::FRAC_1_SQRT_2;
+        let remembered = self.remembered.iter().map(|h| Disc {
+            x: h[0],
+            y: h[1],
+            r: cell,
+        });
+        let discs = discs(&self.obstacles)
+            .into_iter()
+            .chain(remembered)
+            .map(|d| Disc {
+                r: d.r
+                    .min((f.distance(x, y, theta, d.x, d.y) - f.margin - START_SLACK).max(0.0)),
+                ..d
+            })
+            .collect();
+        Field::new(lo, hi, FIELD_RES, discs, self.footprint).with_seen(self.seen.clone())
+    }
+
+    /// The window the field covers: round the start and the goals (and the manoeuvre
+    /// being followed).
+    fn window(&self) -> ([f64; 2], [f64; 2]) {
+        let mut lo = [self.start[0], self.start[1]];
+        let mut hi = lo;
+        let poses = self.goals.iter().map(|g| g.pose).chain(
+            self.following
+                .iter()
+                .flat_map(|m| m.points.iter().map(PathPoint::pose)),
+        );
+        for p in poses {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let lo = [lo[0] - WINDOW_MARGIN, lo[1] - WINDOW_MARGIN];
+        let hi = [hi[0] + WINDOW_MARGIN, hi[1] + WINDOW_MARGIN];
+        (lo, hi)
+    }
+
+    /// Whether the manoeuvre being followed still clears every obstacle by the margin
+    /// less [`HOLD_SLACK`] (perceived outlines shift from scan to scan; a manoeuvre
+    /// dropped for a few centimetres would be searched anew, and the car would shuffle),
+    /// with the car within [`OFF_PATH`] of it.
+    pub fn following_holds(&self) -> bool {
+        let field = ManoeuvreRequest {
+            footprint: Footprint {
+                margin: (self.footprint.margin - HOLD_SLACK).max(0.0),
+                ..self.footprint
+            },
+            ..self.clone()
+        }
+        .field();
+        self.following.as_ref().is_some_and(|m| {
+            let on = m
+                .points
+                .iter()
+                .take(OFF_PATH_LOOK)
+                .any(|p| (p.x - self.start[0]).hypot(p.y - self.start[1]) <= OFF_PATH);
+            (on || m.points.is_empty()) && m.points.iter().all(|p| field.passable(p))
+        })
+    }
+
+    /// Search towards each goal in turn, within one budget of expansions for all: the
+    /// first complete manoeuvre found, else the first partial one
+    /// ([`hybrid::Found::complete`]), smoothed; with the expansions all the searches
+    /// took; or the last goal's failure.
+    pub fn plan(&self, field: &Field) -> (Result<Planned, Failure>, usize) {
+        let mut expansions = 0;
+        let mut partial = None;
+        let mut last = Err(Failure::Unreachable);
+        for goal in &self.goals {
+            let settings = Settings {
+                max_expansions: self.settings.max_expansions.saturating_sub(expansions),
+                ..self.settings
+            };
+            if settings.max_expansions == 0 {
+                break;
+            }
+            match hybrid::search(field, self.start, goal, &settings) {
+                Ok(found) => {
+                    expansions += found.expansions;
+                    let planned = Planned {
+                        manoeuvre: found.manoeuvre.smoothed(self.start, field),
+                        complete: found.complete,
+                    };
+                    if found.complete {
+                        return (Ok(planned), expansions);
+                    }
+                    partial.get_or_insert(planned);
+                }
+                Err(e) => {
+                    if let Failure::Exhausted(n) = e {
+                        expansions += n;
+                    }
+                    last = Err(e);
+                }
+            }
+        }
+        (partial.map_or(last, Ok), expansions)
+    }
+}
+
+/// A manoeuvre found: to a goal (complete), or towards one as far as what is known
+/// allows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    pub manoeuvre: Manoeuvre,
+    pub complete: bool,
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,156 @@
+//! Reeds-Shepp curves (Reeds and Shepp 1990: the shortest paths of a car that drives
+//! forward and backward at a bounded curvature) from the `reeds_shepp` crate, which
+//! computes the 12 base words in their 4 symmetries for a unit turning radius. Here
+//! they are scaled to the car's turning radius, turned into arcs of signed length and
+//! curvature, and verified: a word whose integrated end misses the goal is dropped, so
+//! a defect in a formula can cost a curve, never a wrong one.
+
+use super::path::{PathPoint, arc};
+use reeds_shepp_lib as rs;
+
+/// A curve's integrated end may miss the goal by this much and still be taken, metres
+/// and radians.
+const END_TOLERANCE: f64 = 1e-3;
+
+/// One arc of a curve: its length (a magnitude, metres), its steering curvature (left
+/// positive, 1/m) and its direction of travel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Arc {
+    pub length: f64,
+    pub curvature: f64,
+    pub forward: bool,
+}
+
+/// A Reeds-Shepp curve between two poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Curve {
+    pub arcs: Vec<Arc>,
+    pub length: f64,
+}
+
+impl Curve {
+    /// Direction changes along the curve.
+    pub fn cusps(&self) -> usize {
+        self.arcs
+            .windows(2)
+            .filter(|w| w[0].forward != w[1].forward)
+            .count()
+    }
+
+    /// The curve from `from` sampled every `step` metres or less (the start excluded,
+    /// every arc's end included).
+    pub fn sample(&self, from: [f64; 3], step: f64) -> Vec<PathPoint> {
+        let mut at = from;
+        let mut out = Vec::new();
+        for a in &self.arcs {
+            let n = (a.length / step).ceil().max(1.0) as usize;
+            let d = if a.forward { a.length } else { -a.length } / n as f64;
+            for _ in 0..n {
+                at = arc(at, d, a.curvature);
+                out.push(PathPoint {
+                    x: at[0],
+                    y: at[1],
+                    theta: at[2],
+                    curvature: a.curvature,
+                    forward: a.forward,
+                });
+            }
+        }
+        out
+    }
+
+    /// Where the curve ends from `from`.
+    fn end(&self, from: [f64; 3]) -> [f64; 3] {
+        self.arcs.iter().fold(from, |at, a| {
+            let d = if a.forward { a.length } else { -a.length };
+            arc(at, d, a.curvature)
+        })
+    }
+}
+
+/// Every verified Reeds-Shepp curve from `from` to `to` (x, y, heading) for the turning
+/// radius `radius`, shortest first.
+pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> Vec<Curve> {
+    // The crate works in units of the turning radius, with headings in degrees.
+    let pose = |p: [f64; 3]| rs::Pose {
+        x: p[0] / radius,
+        y: p[1] / radius,
+        theta_degree: p[2].to_degrees(),
+    };
+    let mut out: Vec<Curve> = rs::get_all_paths(pose(from), pose(to))
+        .iter()
+        .map(|words| {
+            let arcs: Vec<Arc> = words
+                .iter()
+                .map(|w| Arc {
+                    length: w.param.abs() * radius,
+                    curvature: match w.steering {
+                        rs::Steering::Left => 1.0 / radius,
+                        rs::Steering::Right => -1.0 / radius,
+                        rs::Steering::Straight => 0.0,
+                    },
+                    forward: w.gear == rs::Gear::Forward,
+                })
+                .collect();
+            let length = arcs.iter().map(|a| a.length).sum();
+            Curve { arcs, length }
+        })
+        .filter(|c| c.length.is_finite() && reaches(c.end(from), to))
+        .collect();
+    out.sort_by(|a, b| a.length.total_cmp(&b.length));
+    out
+}
+
+/// The shortest curve's length from `from` to `to`: the non-holonomic heuristic
+/// without obstacles. Infinite when no curve verifies.
+pub fn shortest(from: [f64; 3], to: [f64; 3], radius: f64) -> f64 {
+    curves(from, to, radius)
+        .first()
+        .map_or(f64::INFINITY, |c| c.length)
+}
+
+fn reaches(end: [f64; 3], to: [f64; 3]) -> bool {
+    let heading = super::super::frame::wrap(end[2] - to[2]).abs();
+    (end[0] - to[0]).hypot(end[1] - to[1]) < END_TOLERANCE && heading < END_TOLERANCE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn every_curve_ends_at_the_goal_and_the_shortest_is_no_longer_than_a_straight_run() {
+        let r = 2.4;
+        let goals = [
+            [10.0, 0.0, 0.0],
+            [0.0, 5.0, PI],
+            [-3.0, 0.0, 0.0],
+            [2.0, -4.0, -PI / 2.0],
+            [0.5, 0.5, 2.5],
+        ];
+        for to in goals {
+            let all = curves([0.0, 0.0, 0.0], to, r);
+            assert!(!all.is_empty(), "no curve to {to:?}");
+            for c in &all {
+                let end = c.sample([0.0, 0.0, 0.0], 0.05).last().copied();
+                let end = end.map(|p| [p.x, p.y, p.theta]).unwrap_or([0.0; 3]);
+                assert!((end[0] - to[0]).hypot(end[1] - to[1]) < 1e-6, "{c:?}");
+            }
+            assert!(all.windows(2).all(|w| w[0].length <= w[1].length));
+        }
+        // Straight ahead: the curve is the straight line.
+        assert!((shortest([0.0, 0.0, 0.0], [10.0, 0.0, 0.0], r) - 10.0).abs() < 1e-9);
+        // Straight back: the same, in reverse.
+        let back = &curves([0.0, 0.0, 0.0], [-3.0, 0.0, 0.0], r)[0];
+        assert!((back.length - 3.0).abs() < 1e-9 && !back.arcs[0].forward);
+    }
+
+    #[test]
+    fn turning_round_on_the_spot_takes_cusps() {
+        // The same place facing the other way: no curve without a change of direction.
+        let c = &curves([0.0, 0.0, 0.0], [0.0, 0.0, PI], 2.4)[0];
+        assert!(c.cusps() >= 1, "{c:?}");
+        assert!(c.length > 2.4 && c.length < 4.0 * 2.4 * PI);
+    }
+}

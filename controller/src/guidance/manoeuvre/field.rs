@@ -1,0 +1,294 @@
+//! The local map the manoeuvre planner searches in: a distance field over a window of
+//! the world (each cell the distance from its centre to the nearest obstacle's edge,
+//! capped) and the car's rectangle checked against it. The field settles most poses at
+//! once (every disc covering the rectangle clear, or a disc inside it touched); the
+//! rest are decided exactly, rectangle against circle, with the obstacles near the
+//! pose. Never the planning circle: the rectangle, grown by the manoeuvre margin.
+
+use super::super::footprint::Footprint;
+use super::path::PathPoint;
+use crate::perception::{SeenWindow, rectangle_seen};
+
+/// Distances are capped at this, metres (beyond it every pose is clear anyway).
+const CAP: f64 = 1.5;
+/// Side of the buckets the obstacles are filed in for the exact check, metres.
+const BUCKET: f64 = 2.0;
+/// Discs covering the rectangle along its axis for the quick check.
+const COVER: usize = 3;
+
+/// An obstacle as the manoeuvre planner sees it: a disc, world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Disc {
+    pub x: f64,
+    pub y: f64,
+    pub r: f64,
+}
+
+/// The distance field over a window, and the car's rectangle.
+#[derive(Clone, Debug)]
+pub struct Field {
+    x0: f64,
+    y0: f64,
+    res: f64,
+    nx: usize,
+    ny: usize,
+    dist: Vec<f32>,
+    discs: Vec<Disc>,
+    buckets: std::collections::HashMap<(i32, i32), Vec<u32>>,
+    /// The largest disc's radius (how far from its bucket a disc reaches).
+    max_r: f64,
+    car: Footprint,
+    /// Space seen free: the car backs only into it (None: everywhere).
+    seen: Option<SeenWindow>,
+}
+
+impl Field {
+    /// The field over the window `lo`..`hi` (world frame) at `res` metres per cell,
+    /// for the car's rectangle `car` (its margin included).
+    pub fn new(lo: [f64; 2], hi: [f64; 2], res: f64, discs: Vec<Disc>, car: Footprint) -> Field {
+        let nx = (((hi[0] - lo[0]) / res).ceil().max(1.0)) as usize;
+        let ny = (((hi[1] - lo[1]) / res).ceil().max(1.0)) as usize;
+        let mut field = Field {
+            x0: lo[0],
+            y0: lo[1],
+            res,
+            nx,
+            ny,
+            dist: vec![CAP as f32; nx * ny],
+            discs: Vec::new(),
+            buckets: std::collections::HashMap::new(),
+            max_r: 0.0,
+            car,
+            seen: None,
+        };
+        for d in discs {
+            field.add(d);
+        }
+        field
+    }
+
+    /// The field with backward motion only into `seen`.
+    pub fn with_seen(self, seen: Option<SeenWindow>) -> Field {
+        Field { seen, ..self }
+    }
+
+    /// Whether the car may be at `p`: the rectangle clear and, reached backwards, in
+    /// seen space.
+    pub fn passable(&self, p: &PathPoint) -> bool {
+        self.clear(p.pose()) && (p.forward || self.seen_at(p.pose()))
+    }
+
+    /// Whether the rectangle at `pose` lies in seen space ([`rectangle_seen`]).
+    pub fn seen_at(&self, [x, y, theta]: [f64; 3]) -> bool {
+        let Some(seen) = &self.seen else {
+            return true;
+        };
+        let f = &self.car;
+        rectangle_seen(
+            |x, y| seen.seen(x, y),
+            [x, y, theta],
+            f.front,
+            f.rear,
+            f.half_width,
+        )
+    }
+
+    fn add(&mut self, d: Disc) {
+        let reach = d.r + CAP;
+        let (i0, j0) = self.cell(d.x - reach, d.y - reach);
+        let (i1, j1) = self.cell(d.x + reach, d.y + reach);
+        for j in j0.max(0)..=j1.min(self.ny as i64 - 1) {
+            for i in i0.max(0)..=i1.min(self.nx as i64 - 1) {
+                let (cx, cy) = self.centre(i as usize, j as usize);
+                let k = j as usize * self.nx + i as usize;
+                let e = ((cx - d.x).hypot(cy - d.y) - d.r) as f32;
+                if e < self.dist[k] {
+                    self.dist[k] = e;
+                }
+            }
+        }
+        self.max_r = self.max_r.max(d.r);
+        let id = self.discs.len() as u32;
+        self.discs.push(d);
+        let key = bucket(d.x, d.y);
+        self.buckets.entry(key).or_default().push(id);
+    }
+
+    fn cell(&self, x: f64, y: f64) -> (i64, i64) {
+        (
+            ((x - self.x0) / self.res).floor() as i64,
+            ((y - self.y0) / self.res).floor() as i64,
+        )
+    }
+
+    fn centre(&self, i: usize, j: usize) -> (f64, f64) {
+        (
+            self.x0 + (i as f64 + 0.5) * self.res,
+            self.y0 + (j as f64 + 0.5) * self.res,
+        )
+    }
+
+    /// Whether (x, y) lies in the window.
+    pub fn inside(&self, x: f64, y: f64) -> bool {
+        let (i, j) = self.cell(x, y);
+        i >= 0 && j >= 0 && (i as usize) < self.nx && (j as usize) < self.ny
+    }
+
+    /// The distance from (x, y) to the nearest obstacle's edge, to within half a cell's
+    /// diagonal (capped; 0 outside the window).
+    pub fn distance(&self, x: f64, y: f64) -> f64 {
+        if !self.inside(x, y) {
+            return 0.0;
+        }
+        let (i, j) = self.cell(x, y);
+        f64::from(self.dist[j as usize * self.nx + i as usize])
+    }
+
+    /// How far a cell's distance may be off at a point in it, metres.
+    fn slack(&self) -> f64 {
+        self.res * std::f64::consts::FRAC_1_SQRT_2
+    }
+
+    /// The window's corners.
+    pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+        let hi = [
+            self.x0 + self.nx as f64 * self.res,
+            self.y0 + self.ny as f64 * self.res,
+        ];
+        ([self.x0, self.y0], hi)
+    }
+
+    pub fn footprint(&self) -> &Footprint {
+        &self.car
+    }
+
+    /// Whether the car's rectangle (grown by its margin) at `pose` clears every
+    /// obstacle and lies in the window.
+    pub fn clear(&self, pose: [f64; 3]) -> bool {
+        let [x, y, theta] = pose;
+        let f = &self.car;
+        let (c, s) = (theta.cos(), theta.sin());
+        let half = (f.front + f.rear) / 2.0;
+        let mid = (f.front - f.rear) / 2.0;
+        let slack = self.slack();
+        let on_axis = |u: f64| (x + u * c, y + u * s);
+        // Every covering disc clear: clear.
+        let rho = (half / COVER as f64).hypot(f.half_width) + f.margin;
+        let covered = (0..COVER).all(|k| {
+            let u = mid - half + half / COVER as f64 * (2 * k + 1) as f64;
+            let (px, py) = on_axis(u);
+            self.inside(px, py) && self.distance(px, py) - slack >= rho
+        });
+        if covered {
+            return self.corners_inside(pose);
+        }
+        // A disc of the half width inside the rectangle touched: not clear.
+        let inner = f.half_width + f.margin;
+        let touched = [-f.rear + f.half_width, mid, f.front - f.half_width]
+            .into_iter()
+            .any(|u| {
+                let (px, py) = on_axis(u);
+                self.distance(px, py) + slack < inner
+            });
+        if touched {
+            return false;
+        }
+        self.corners_inside(pose) && self.exact(pose)
+    }
+
+    /// Whether the rectangle's corners lie in the window (beyond it nothing is known).
+    fn corners_inside(&self, [x, y, theta]: [f64; 3]) -> bool {
+        let f = &self.car;
+        let (c, s) = (theta.cos(), theta.sin());
+        [
+            (f.front, f.half_width),
+            (f.front, -f.half_width),
+            (-f.rear, f.half_width),
+            (-f.rear, -f.half_width),
+        ]
+        .into_iter()
+        .all(|(u, v)| self.inside(x + u * c - v * s, y + u * s + v * c))
+    }
+
+    /// The exact check, rectangle against each obstacle near it.
+    fn exact(&self, [x, y, theta]: [f64; 3]) -> bool {
+        let f = &self.car;
+        let reach = f.front.max(f.rear).hypot(f.half_width) + f.margin + self.max_r;
+        let (b0, b1) = (bucket(x - reach, y - reach), bucket(x + reach, y + reach));
+        for bj in b0.1..=b1.1 {
+            for bi in b0.0..=b1.0 {
+                let Some(ids) = self.buckets.get(&(bi, bj)) else {
+                    continue;
+                };
+                for &id in ids {
+                    let d = self.discs[id as usize];
+                    if f.distance(x, y, theta, d.x, d.y) <= d.r + f.margin {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+}
+
+fn bucket(x: f64, y: f64) -> (i32, i32) {
+    ((x / BUCKET).floor() as i32, (y / BUCKET).floor() as i32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) const CAR: Footprint = Footprint {
+        front: 2.025,
+        rear: 0.375,
+        half_width: 0.6,
+        margin: 0.1,
+    };
+
+    /// Whether the rectangle clears every disc, checked the slow way.
+    fn brute(pose: [f64; 3], discs: &[Disc]) -> bool {
+        discs
+            .iter()
+            .all(|d| CAR.distance(pose[0], pose[1], pose[2], d.x, d.y) > d.r + CAR.margin)
+    }
+
+    #[test]
+    fn the_field_agrees_with_the_exact_rectangle_check_everywhere() {
+        let discs: Vec<Disc> = (0..40)
+            .map(|k| {
+                let a = f64::from(k) * 0.7;
+                Disc {
+                    x: 5.0 + 4.0 * a.cos() + f64::from(k % 3),
+                    y: 5.0 + 4.0 * a.sin(),
+                    r: 0.1 + 0.05 * f64::from(k % 4),
+                }
+            })
+            .collect();
+        let field = Field::new([-5.0, -5.0], [15.0, 15.0], 0.1, discs.clone(), CAR);
+        let mut checked = 0;
+        for i in 0..60 {
+            for j in 0..60 {
+                for h in 0..8 {
+                    let pose = [
+                        f64::from(i) * 0.2 - 1.0,
+                        f64::from(j) * 0.2 - 1.0,
+                        f64::from(h) * 0.8,
+                    ];
+                    assert_eq!(field.clear(pose), brute(pose, &discs), "{pose:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 28_800);
+    }
+
+    #[test]
+    fn a_pose_reaching_out_of_the_window_is_not_clear() {
+        let field = Field::new([0.0, 0.0], [10.0, 10.0], 0.1, Vec::new(), CAR);
+        assert!(field.clear([5.0, 5.0, 0.0]));
+        assert!(!field.clear([8.5, 5.0, 0.0]));
+        assert_eq!(field.distance(-1.0, 5.0), 0.0);
+    }
+}

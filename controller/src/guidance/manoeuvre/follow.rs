@@ -1,0 +1,280 @@
+//! Following a manoeuvre segment by segment: forward segments with the steering law as
+//! the polynomial's path is followed, backward ones with the same law driving a virtual
+//! car that faces backwards (its heading the car's plus pi, its road-wheel angle the
+//! car's negated: the kinematics at the rear axle are the same), every segment driven to
+//! a stop at its end (a cusp), the next begun once the car stands.
+
+use super::hybrid::SAMPLE;
+use super::path::{Manoeuvre, PathPoint};
+use crate::guidance::follower::{FollowInputs, SteeringLaw};
+use crate::localisation::Pose;
+
+/// A segment counts as driven this near its end (along the direction of travel),
+/// metres.
+const END_SLACK: f64 = 0.15;
+/// The nearest point is looked for this many samples ahead of the last one.
+const LOOK_AHEAD: usize = 40;
+
+/// What following asks of the actuators.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Command {
+    /// Forward (else in gear R).
+    pub forward: bool,
+    /// Road-wheel angle, radians.
+    pub steer: f64,
+    /// Speed, a magnitude, m/s (0: brake to a stand).
+    pub speed: f64,
+    /// Left of the segment to its end, metres.
+    pub room: f64,
+    /// The law's inputs (the virtual car's on a backward segment).
+    pub inputs: FollowInputs,
+}
+
+/// A manoeuvre being followed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Following {
+    pub manoeuvre: Manoeuvre,
+    segments: Vec<std::ops::Range<usize>>,
+    /// The segment being driven.
+    segment: usize,
+    /// The sample nearest the car, within that segment.
+    at: usize,
+}
+
+/// How following is tuned: speeds (magnitudes), the deceleration to stop at a segment's
+/// end, the distance the speed loop rolls on after a stop command, and the wheelbase.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pace {
+    pub forward_speed: f64,
+    pub reverse_speed: f64,
+    pub decel: f64,
+    pub coast: f64,
+    pub wheelbase: f64,
+}
+
+impl Following {
+    pub fn new(manoeuvre: Manoeuvre) -> Following {
+        let segments = manoeuvre.segments();
+        Following {
+            manoeuvre,
+            segments,
+            segment: 0,
+            at: 0,
+        }
+    }
+
+    /// The rest of the manoeuvre, from the sample nearest the car.
+    pub fn rest(&self) -> Manoeuvre {
+        Manoeuvre {
+            points: self.manoeuvre.points[self.at.min(self.manoeuvre.points.len())..].to_vec(),
+        }
+    }
+
+    /// On the last segment, driving forward: the polynomial may take over.
+    pub fn on_last_forward(&self) -> bool {
+        self.segment + 1 == self.segments.len()
+            && self.segments[self.segment].start < self.manoeuvre.points.len()
+            && self.manoeuvre.points[self.segments[self.segment].start].forward
+    }
+
+    /// Every segment driven.
+    pub fn finished(&self) -> bool {
+        self.segment >= self.segments.len()
+    }
+
+    /// The command from `pose` (where the car is: progress and the end of a segment) and
+    /// `ahead` (where it will be when the command acts: steering); None once finished.
+    pub fn command(
+        &mut self,
+        pose: &Pose,
+        ahead: &Pose,
+        law: &SteeringLaw,
+        pace: &Pace,
+    ) -> Option<Command> {
+        loop {
+            let range = self.segments.get(self.segment)?.clone();
+            let points = &self.manoeuvre.points[range.clone()];
+            let forward = points[0].forward;
+            self.at = nearest(points, range.start, self.at.max(range.start), pose);
+            let left = left_of(points, self.at - range.start, pose, forward);
+            if left > END_SLACK {
+                let j = nearest(points, range.start, self.at, ahead) - range.start;
+                let inputs = inputs(&points[j], ahead, forward, pace.wheelbase);
+                let steer = if forward {
+                    law.steer(&inputs)
+                } else {
+                    -law.steer(&inputs)
+                };
+                let cruise = if forward {
+                    pace.forward_speed
+                } else {
+                    pace.reverse_speed
+                };
+                let stop = (2.0 * pace.decel * (left - pace.coast).max(0.0)).sqrt();
+                return Some(Command {
+                    forward,
+                    steer,
+                    speed: cruise.min(stop),
+                    room: left,
+                    inputs,
+                });
+            }
+            // At the segment's end: stand, then the next.
+            if pose.v.abs() >= super::super::STANDING {
+                let inputs = inputs(&points[points.len() - 1], ahead, forward, pace.wheelbase);
+                return Some(Command {
+                    forward,
+                    steer: if forward { 1.0 } else { -1.0 } * inputs.phi_ref,
+                    speed: 0.0,
+                    room: 0.0,
+                    inputs,
+                });
+            }
+            self.segment += 1;
+            self.at = range.end;
+        }
+    }
+}
+
+/// The index of the sample of `points` (the first at `offset` in the manoeuvre) nearest
+/// `pose`, from `from` on, at most [`LOOK_AHEAD`] samples on.
+fn nearest(points: &[PathPoint], offset: usize, from: usize, pose: &Pose) -> usize {
+    let first = from - offset;
+    let last = (first + LOOK_AHEAD).min(points.len() - 1);
+    let d = |p: &PathPoint| (p.x - pose.x).hypot(p.y - pose.y);
+    (first..=last)
+        .min_by(|&a, &b| d(&points[a]).total_cmp(&d(&points[b])))
+        .map_or(from, |j| j + offset)
+}
+
+/// What is left of the segment `points` from its sample `j`, the car at `pose`: the
+/// samples' length, plus how far the car stands short of sample `j` along the direction
+/// of travel (negative once past); 0 once past the end.
+fn left_of(points: &[PathPoint], j: usize, pose: &Pose, forward: bool) -> f64 {
+    let p = &points[j];
+    let sign = if forward { 1.0 } else { -1.0 };
+    let along = sign * ((p.x - pose.x) * p.theta.cos() + (p.y - pose.y) * p.theta.sin());
+    let samples = (points.len() - 1 - j) as f64 * SAMPLE;
+    (samples + along).max(0.0)
+}
+
+/// The steering law's inputs at sample `p` from `pose`; backwards, the virtual car's
+/// (facing backwards, its road-wheel angle negated).
+fn inputs(p: &PathPoint, pose: &Pose, forward: bool, wheelbase: f64) -> FollowInputs {
+    let left = -(pose.x - p.x) * p.theta.sin() + (pose.y - p.y) * p.theta.cos();
+    let phi = (wheelbase * p.curvature).atan();
+    let sign = if forward { 1.0 } else { -1.0 };
+    FollowInputs {
+        e_y: sign * left,
+        e_theta: super::super::frame::wrap(pose.theta - p.theta),
+        phi_ref: sign * phi,
+        v: pose.v.abs(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::guidance::manoeuvre::path::arc;
+
+    const LAW: SteeringLaw = SteeringLaw::Optimal {
+        omega: 0.9,
+        zeta: 0.9,
+        wheelbase: 1.65,
+    };
+    const PACE: Pace = Pace {
+        forward_speed: 1.0,
+        reverse_speed: 0.5,
+        decel: 1.0,
+        coast: 0.0,
+        wheelbase: 1.65,
+    };
+
+    /// Drive the car (kinematic bicycle, commands acting at once) along `m` until it
+    /// finishes or `limit` steps pass; the poses driven.
+    fn drive(m: Manoeuvre, limit: usize) -> (Following, Vec<Pose>) {
+        let mut f = Following::new(m);
+        let mut pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let mut poses = Vec::new();
+        let dt = 0.01;
+        for _ in 0..limit {
+            let Some(c) = f.command(&pose, &pose, &LAW, &PACE) else {
+                break;
+            };
+            let target = if c.forward { c.speed } else { -c.speed };
+            // First-order speed, instant steering within the lock.
+            pose.v += (target - pose.v) * (dt / 0.3);
+            if c.speed == 0.0 && pose.v.abs() < 0.02 {
+                pose.v = 0.0;
+            }
+            pose.phi = c.steer.clamp(-0.61, 0.61);
+            let p = arc(
+                [pose.x, pose.y, pose.theta],
+                pose.v * dt,
+                pose.phi.tan() / 1.65,
+            );
+            (pose.x, pose.y, pose.theta) = (p[0], p[1], p[2]);
+            poses.push(pose);
+        }
+        (f, poses)
+    }
+
+    fn sampled(start: [f64; 3], arcs: &[(f64, f64)]) -> Manoeuvre {
+        let mut at = start;
+        let mut points = Vec::new();
+        for &(d, curvature) in arcs {
+            let n = (d.abs() / SAMPLE).round() as usize;
+            for _ in 0..n {
+                at = arc(at, d / n as f64, curvature);
+                points.push(PathPoint {
+                    x: at[0],
+                    y: at[1],
+                    theta: at[2],
+                    curvature,
+                    forward: d > 0.0,
+                });
+            }
+        }
+        Manoeuvre { points }
+    }
+
+    #[test]
+    fn a_three_point_turn_is_driven_to_its_end_stopping_at_each_cusp() {
+        // Forward left, back right, forward left: the car turns round.
+        let m = sampled([0.0; 3], &[(3.0, 0.4), (-2.5, -0.4), (3.0, 0.4)]);
+        let end = m.points[m.points.len() - 1];
+        let (f, poses) = drive(m, 20_000);
+        assert!(f.finished(), "not finished");
+        let last = poses[poses.len() - 1];
+        assert!(
+            (last.x - end.x).hypot(last.y - end.y) < 0.3,
+            "{last:?} vs {end:?}"
+        );
+        // It went backwards, and stood between the segments.
+        assert!(poses.iter().any(|p| p.v < -0.3));
+        let cusps: Vec<f64> = poses
+            .windows(2)
+            .filter(|w| w[0].v * w[1].v < 0.0)
+            .map(|w| w[0].v.abs())
+            .collect();
+        assert_eq!(cusps.len(), 2, "{cusps:?}");
+        assert!(cusps.iter().all(|v| *v < 0.06), "{cusps:?}");
+    }
+
+    #[test]
+    fn a_backward_arc_is_tracked_from_an_offset_start() {
+        // Straight back with the car 0.3 m off to the left: the error shrinks.
+        let mut m = sampled([0.0, -0.3, 0.0], &[(-6.0, 0.0)]);
+        m.points.iter_mut().for_each(|p| p.y = -0.3);
+        let (_, poses) = drive(m, 20_000);
+        let last = poses[poses.len() - 1];
+        assert!(last.x < -5.0, "{last:?}");
+        assert!((last.y + 0.3).abs() < 0.1, "{last:?}");
+    }
+}

@@ -1,0 +1,418 @@
+//! Hybrid A* (Dolgov, Thrun, Montemerlo and Diebel 2008, "Practical search techniques
+//! in path planning for autonomous driving"): A* over continuous poses, one kept per
+//! cell of a grid of position and heading; successors are arcs of one step at a few
+//! steering curvatures up to the planned lock, forward and backward; the cost is the
+//! length driven, backwards dearer, plus a penalty per change of direction (cusp) and
+//! for steering and changes of it. Two heuristics, the larger taken: the holonomic one
+//! with obstacles (the length of the shortest 8-connected way on the grid from the
+//! goal, through cells the rear axle may occupy) and, within a few turning radii of the
+//! goal, the non-holonomic one without obstacles (the shortest Reeds-Shepp curve). Every
+//! few expansions the shortest Reeds-Shepp curves to the goal are tried as an analytic
+//! expansion; the first one the car's rectangle clears ends the search. The search is
+//! bounded by a number of expansions (not by time: a plan must not depend on the
+//! machine's speed).
+
+use super::curves;
+use super::field::Field;
+use super::path::{Manoeuvre, PathPoint, arc};
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap};
+
+/// Step between the poses a path is sampled and checked at, metres.
+pub const SAMPLE: f64 = 0.1;
+
+/// The search's tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Turning radius at the lock the manoeuvre may use (rear axle), metres.
+    pub turn_radius: f64,
+    /// Arc length of one successor, metres (more than a cell's diagonal).
+    pub step: f64,
+    /// Side of a grid cell, metres.
+    pub xy_res: f64,
+    /// Heading cells in a full turn.
+    pub heading_bins: usize,
+    /// Cost per metre driven backwards, against 1 forwards.
+    pub reverse_weight: f64,
+    /// Cost of a change of direction, metres' worth.
+    pub cusp_cost: f64,
+    /// Cost per metre driven at full lock (in proportion to the curvature).
+    pub steer_weight: f64,
+    /// Cost of a change of steering between successors, metres' worth per full lock.
+    pub steer_change_cost: f64,
+    /// Expansions before the search gives up.
+    pub max_expansions: usize,
+}
+
+impl Default for Settings {
+    /// The golf car's: arcs of 0.4 m on a grid of 0.25 m and 5 degrees; backwards at
+    /// twice the cost, a cusp worth 3 m.
+    fn default() -> Settings {
+        Settings {
+            turn_radius: 2.6,
+            step: 0.4,
+            xy_res: 0.25,
+            heading_bins: 72,
+            reverse_weight: 2.0,
+            cusp_cost: 3.0,
+            steer_weight: 0.1,
+            steer_change_cost: 0.3,
+            max_expansions: 20_000,
+        }
+    }
+}
+
+/// Where the manoeuvre ends: a pose, and how near it counts as there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Goal {
+    pub pose: [f64; 3],
+    /// Metres and radians.
+    pub tol_xy: f64,
+    pub tol_theta: f64,
+}
+
+/// A manoeuvre found, and what the search took.
+#[derive(Clone, Debug)]
+pub struct Found {
+    pub manoeuvre: Manoeuvre,
+    pub expansions: usize,
+    /// It ends at the goal; else it ends where the search came nearest the goal (by
+    /// the holonomic way's length) within what is known, at least [`PARTIAL_PROGRESS`]
+    /// nearer than the start: driven, it shows the laser more, and the next search
+    /// goes on.
+    pub complete: bool,
+}
+
+/// A partial manoeuvre must bring the car this much nearer the goal (by the holonomic
+/// way's length), metres.
+pub const PARTIAL_PROGRESS: f64 = 1.0;
+
+/// Why no manoeuvre was found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Failure {
+    #[error("the car's rectangle does not clear its own pose")]
+    StartBlocked,
+    #[error("the car's rectangle does not fit at the goal")]
+    GoalBlocked,
+    #[error("no way to the goal on the map (holonomic)")]
+    Unreachable,
+    #[error("no manoeuvre nearer the goal within {0} expansions")]
+    Exhausted(usize),
+}
+
+/// Steering curvatures tried, as fractions of the lock.
+const STEERS: [f64; 5] = [1.0, 0.5, 0.0, -0.5, -1.0];
+/// The Reeds-Shepp heuristic is evaluated within this many turning radii of the goal.
+const RS_HEURISTIC_RADII: f64 = 4.0;
+/// Analytic expansions are tried within this of the goal, metres, and at most this
+/// many curves each time (shortest first).
+const ANALYTIC_RANGE: f64 = 25.0;
+const ANALYTIC_CURVES: usize = 6;
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    pose: [f64; 3],
+    g: f64,
+    parent: usize,
+    forward: bool,
+    curvature: f64,
+}
+
+/// Search a manoeuvre from `start` to `goal` in `field`.
+pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Result<Found, Failure> {
+    if !field.clear(start) {
+        return Err(Failure::StartBlocked);
+    }
+    if !field.clear(goal.pose) {
+        return Err(Failure::GoalBlocked);
+    }
+    let holo = Holonomic::new(field, goal.pose, s.xy_res);
+    let h0 = holo.at(start[0], start[1]);
+    if !h0.is_finite() {
+        return Err(Failure::Unreachable);
+    }
+    let mut nodes = vec![Node {
+        pose: start,
+        g: 0.0,
+        parent: usize::MAX,
+        forward: true,
+        curvature: 0.0,
+    }];
+    let mut best: HashMap<(i64, i64, i64), usize> = HashMap::new();
+    let mut closed: std::collections::HashSet<usize> = std::collections::HashSet::new();
+    let mut open = BinaryHeap::new();
+    let mut seq = 0u64;
+    open.push(Reverse((h0.to_bits(), seq, 0usize)));
+    let mut expansions = 0;
+    // The generated node nearest the goal by the holonomic way's length.
+    let mut nearest = (h0, 0usize);
+    while let Some(Reverse((_, _, id))) = open.pop() {
+        if !closed.insert(id) {
+            continue;
+        }
+        let node = nodes[id];
+        if at_goal(node.pose, goal) {
+            let manoeuvre = finish(&nodes, id, Vec::new(), s.step);
+            return Ok(Found {
+                manoeuvre,
+                expansions,
+                complete: true,
+            });
+        }
+        expansions += 1;
+        if expansions > s.max_expansions {
+            break;
+        }
+        if let Some(tail) = analytic(field, &node, goal, s, expansions) {
+            let manoeuvre = finish(&nodes, id, tail, s.step);
+            return Ok(Found {
+                manoeuvre,
+                expansions,
+                complete: true,
+            });
+        }
+        for (pose, forward, curvature, step_cost) in successors(field, &node, s) {
+            let g = node.g + step_cost;
+            let key = key(pose, s);
+            if best.get(&key).is_some_and(|&b| nodes[b].g <= g) {
+                continue;
+            }
+            let h = heuristic(&holo, pose, goal, s);
+            if !h.is_finite() {
+                continue;
+            }
+            nodes.push(Node {
+                pose,
+                g,
+                parent: id,
+                forward,
+                curvature,
+            });
+            let child = nodes.len() - 1;
+            let way = holo.at(pose[0], pose[1]);
+            if way < nearest.0 {
+                nearest = (way, child);
+            }
+            best.insert(key, child);
+            seq += 1;
+            open.push(Reverse(((g + h).to_bits(), seq, child)));
+        }
+    }
+    let expansions = expansions.min(s.max_expansions);
+    if nearest.0 > h0 - PARTIAL_PROGRESS {
+        return Err(Failure::Exhausted(expansions));
+    }
+    Ok(Found {
+        manoeuvre: finish(&nodes, nearest.1, Vec::new(), s.step),
+        expansions,
+        complete: false,
+    })
+}
+
+fn at_goal(pose: [f64; 3], goal: &Goal) -> bool {
+    (pose[0] - goal.pose[0]).hypot(pose[1] - goal.pose[1]) <= goal.tol_xy
+        && super::super::frame::wrap(pose[2] - goal.pose[2]).abs() <= goal.tol_theta
+}
+
+fn key(pose: [f64; 3], s: &Settings) -> (i64, i64, i64) {
+    let turn = std::f64::consts::TAU;
+    let h = (pose[2].rem_euclid(turn) / turn * s.heading_bins as f64).floor() as i64;
+    (
+        (pose[0] / s.xy_res).floor() as i64,
+        (pose[1] / s.xy_res).floor() as i64,
+        h % s.heading_bins as i64,
+    )
+}
+
+fn heuristic(holo: &Holonomic, pose: [f64; 3], goal: &Goal, s: &Settings) -> f64 {
+    let h = holo.at(pose[0], pose[1]);
+    let near =
+        (pose[0] - goal.pose[0]).hypot(pose[1] - goal.pose[1]) < RS_HEURISTIC_RADII * s.turn_radius;
+    if near && h.is_finite() {
+        // The shortest curve to anywhere within the goal's tolerance is shorter by at
+        // most that tolerance.
+        let rs = curves::shortest(pose, goal.pose, s.turn_radius) - goal.tol_xy;
+        return h.max(rs);
+    }
+    h
+}
+
+/// The successors of `node`: one step on each steering, forward and backward, whose
+/// every sampled pose the car's rectangle clears; with the cost of the step.
+fn successors(field: &Field, node: &Node, s: &Settings) -> Vec<([f64; 3], bool, f64, f64)> {
+    let n = (s.step / SAMPLE).ceil().max(1.0) as usize;
+    let root = node.parent == usize::MAX;
+    let mut out = Vec::with_capacity(2 * STEERS.len());
+    for forward in [true, false] {
+        for fraction in STEERS {
+            let curvature = fraction / s.turn_radius;
+            let d = if forward { s.step } else { -s.step };
+            let clear = (1..=n).all(|k| {
+                let p = arc(node.pose, d * k as f64 / n as f64, curvature);
+                field.clear(p) && (forward || field.seen_at(p))
+            });
+            if !clear {
+                continue;
+            }
+            let mut cost = s.step * if forward { 1.0 } else { s.reverse_weight };
+            cost += s.steer_weight * fraction.abs() * s.step;
+            if !root {
+                cost += s.steer_change_cost * (curvature - node.curvature).abs() * s.turn_radius;
+                if forward != node.forward {
+                    cost += s.cusp_cost;
+                }
+            }
+            out.push((arc(node.pose, d, curvature), forward, curvature, cost));
+        }
+    }
+    out
+}
+
+/// An analytic expansion from `node`: the shortest Reeds-Shepp curves to the goal, the
+/// first the rectangle clears at every sample, sampled. Tried more often nearer
+/// the goal.
+fn analytic(
+    field: &Field,
+    node: &Node,
+    goal: &Goal,
+    s: &Settings,
+    expansions: usize,
+) -> Option<Vec<PathPoint>> {
+    let dist = (node.pose[0] - goal.pose[0]).hypot(node.pose[1] - goal.pose[1]);
+    let every = 1 + (dist / 3.0) as usize;
+    if dist > ANALYTIC_RANGE || !expansions.is_multiple_of(every) {
+        return None;
+    }
+    curves::curves(node.pose, goal.pose, s.turn_radius)
+        .into_iter()
+        .take(ANALYTIC_CURVES)
+        .find_map(|c| {
+            let points = c.sample(node.pose, SAMPLE);
+            if !points.iter().all(|p| field.passable(p)) {
+                return None;
+            }
+            Some(points)
+        })
+}
+
+/// The manoeuvre from the start to node `id` (each node one step of `step` metres from
+/// its parent), then `tail`, sampled every [`SAMPLE`].
+fn finish(nodes: &[Node], id: usize, tail: Vec<PathPoint>, step: f64) -> Manoeuvre {
+    let mut chain = Vec::new();
+    let mut at = id;
+    while at != usize::MAX && nodes[at].parent != usize::MAX {
+        chain.push(nodes[at]);
+        at = nodes[at].parent;
+    }
+    chain.reverse();
+    let n = (step / SAMPLE).ceil().max(1.0) as usize;
+    let mut points = Vec::with_capacity(chain.len() * n + tail.len());
+    for node in &chain {
+        let parent = nodes[node.parent].pose;
+        let signed = if node.forward { step } else { -step };
+        points.extend((1..=n).map(|k| {
+            let p = arc(parent, signed * k as f64 / n as f64, node.curvature);
+            PathPoint {
+                x: p[0],
+                y: p[1],
+                theta: p[2],
+                curvature: node.curvature,
+                forward: node.forward,
+            }
+        }));
+    }
+    points.extend(tail);
+    Manoeuvre { points }
+}
+
+/// The holonomic heuristic with obstacles: the length of the shortest 8-connected way
+/// from each cell to the goal's, through cells whose distance to the nearest obstacle
+/// lets the rear axle stand there (Dijkstra from the goal).
+struct Holonomic {
+    x0: f64,
+    y0: f64,
+    res: f64,
+    nx: usize,
+    ny: usize,
+    cost: Vec<f64>,
+}
+
+impl Holonomic {
+    fn new(field: &Field, goal: [f64; 3], res: f64) -> Holonomic {
+        let (lo, hi) = field.bounds();
+        let nx = ((hi[0] - lo[0]) / res).ceil() as usize;
+        let ny = ((hi[1] - lo[1]) / res).ceil() as usize;
+        let f = field.footprint();
+        // The rear axle is at least this far from every obstacle, less the field's
+        // error over a cell.
+        let room = f.rear.min(f.half_width) + f.margin - res;
+        let passable: Vec<bool> = (0..nx * ny)
+            .map(|k| {
+                let (i, j) = (k % nx, k / nx);
+                let (x, y) = (
+                    lo[0] + (i as f64 + 0.5) * res,
+                    lo[1] + (j as f64 + 0.5) * res,
+                );
+                field.distance(x, y) >= room
+            })
+            .collect();
+        let mut h = Holonomic {
+            x0: lo[0],
+            y0: lo[1],
+            res,
+            nx,
+            ny,
+            cost: vec![f64::INFINITY; nx * ny],
+        };
+        let Some(g) = h.index(goal[0], goal[1]) else {
+            return h;
+        };
+        let mut open = BinaryHeap::new();
+        h.cost[g] = 0.0;
+        open.push(Reverse((0u64, g)));
+        let moves = [
+            (1i64, 0i64, 1.0),
+            (-1, 0, 1.0),
+            (0, 1, 1.0),
+            (0, -1, 1.0),
+            (1, 1, std::f64::consts::SQRT_2),
+            (1, -1, std::f64::consts::SQRT_2),
+            (-1, 1, std::f64::consts::SQRT_2),
+            (-1, -1, std::f64::consts::SQRT_2),
+        ];
+        while let Some(Reverse((bits, k))) = open.pop() {
+            let c = f64::from_bits(bits);
+            if c > h.cost[k] {
+                continue;
+            }
+            let (i, j) = ((k % nx) as i64, (k / nx) as i64);
+            for (di, dj, w) in moves {
+                let (a, b) = (i + di, j + dj);
+                if a < 0 || b < 0 || a >= nx as i64 || b >= ny as i64 {
+                    continue;
+                }
+                let n = b as usize * nx + a as usize;
+                let next = c + w * res;
+                if passable[n] && next < h.cost[n] {
+                    h.cost[n] = next;
+                    open.push(Reverse((next.to_bits(), n)));
+                }
+            }
+        }
+        h
+    }
+
+    fn index(&self, x: f64, y: f64) -> Option<usize> {
+        let i = ((x - self.x0) / self.res).floor();
+        let j = ((y - self.y0) / self.res).floor();
+        (i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny)
+            .then(|| j as usize * self.nx + i as usize)
+    }
+
+    /// The way's length from (x, y), less a cell's diagonal (the cell's error).
+    fn at(&self, x: f64, y: f64) -> f64 {
+        self.index(x, y).map_or(f64::INFINITY, |k| {
+            (self.cost[k] - self.res * std::f64::consts::SQRT_2).max(0.0)
+        })
+    }
+}

@@ -1,0 +1,155 @@
+//! The manoeuvre planner on the tight places it is for.
+
+use super::*;
+use std::f64::consts::PI;
+
+const CAR: Footprint = Footprint {
+    front: 2.025,
+    rear: 0.375,
+    half_width: 0.6,
+    margin: 0.15,
+};
+
+fn settings() -> Settings {
+    Settings {
+        max_expansions: 40_000,
+        ..Settings::default()
+    }
+}
+
+fn post(x: f64, y: f64, radius: f64) -> Circle {
+    Circle {
+        x,
+        y,
+        radius,
+        vx: 0.0,
+        vy: 0.0,
+    }
+}
+
+/// A wall from `a` to `b` as a chain of circles of radius `r`.
+fn wall(a: (f64, f64), b: (f64, f64), r: f64) -> Vec<Circle> {
+    let n = ((b.0 - a.0).hypot(b.1 - a.1) / r).ceil() as usize;
+    (0..=n)
+        .map(|k| {
+            let t = k as f64 / n as f64;
+            post(a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t, r)
+        })
+        .collect()
+}
+
+fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Circle>) -> ManoeuvreRequest {
+    ManoeuvreRequest {
+        start,
+        goals: vec![Goal {
+            pose: goal,
+            tol_xy: 0.3,
+            tol_theta: 0.2,
+        }],
+        obstacles,
+        footprint: CAR,
+        settings: settings(),
+        following: None,
+        seen: None,
+        remembered: Vec::new(),
+    }
+}
+
+/// Plan, and check the result: found, every pose clear, ending near the goal.
+fn planned(req: &ManoeuvreRequest) -> Manoeuvre {
+    let field = req.field();
+    let (result, expansions) = req.plan(&field);
+    let m = match result {
+        Ok(p) if p.complete => p.manoeuvre,
+        Ok(_) => panic!("a partial manoeuvre only"),
+        Err(e) => panic!("no manoeuvre: {e} after {expansions} expansions"),
+    };
+    assert!(m.points.iter().all(|p| field.clear(p.pose())));
+    let end = m.points[m.points.len() - 1];
+    let goal = req.goals[0].pose;
+    assert!(
+        (end.x - goal[0]).hypot(end.y - goal[1]) <= 0.3 + 1e-6,
+        "{end:?}"
+    );
+    m
+}
+
+#[test]
+fn an_open_field_is_crossed_forward_without_a_cusp() {
+    let m = planned(&request([0.0, 0.0, 0.0], [12.0, 3.0, 0.0], Vec::new()));
+    assert_eq!(m.cusps(), 0);
+    assert!(m.points.iter().all(|p| p.forward));
+    assert!(m.length([0.0, 0.0, 0.0]) < 14.0);
+}
+
+#[test]
+fn the_end_of_a_dead_end_alley_is_turned_round_in_with_cusps() {
+    // A 6 m wide alley, closed 5 m ahead of the car's nose; the goal is behind.
+    let mut obstacles = wall((-12.0, 3.0), (7.0, 3.0), 0.2);
+    obstacles.extend(wall((-12.0, -3.0), (7.0, -3.0), 0.2));
+    obstacles.extend(wall((7.0, -3.0), (7.0, 3.0), 0.2));
+    let m = planned(&request([0.0, 0.0, 0.0], [-6.0, 0.0, PI], obstacles));
+    assert!(m.cusps() >= 1, "turned round without a cusp");
+    assert!(m.points.iter().any(|p| !p.forward));
+}
+
+#[test]
+fn a_car_parked_nose_in_backs_out_first() {
+    // Carts 0.6 m either side, a wall 0.5 m ahead of the nose; the goal behind.
+    let mut obstacles = wall((-0.4, 1.35), (2.0, 1.35), 0.15);
+    obstacles.extend(wall((-0.4, -1.35), (2.0, -1.35), 0.15));
+    obstacles.extend(wall((2.7, -3.0), (2.7, 3.0), 0.15));
+    let m = planned(&request([0.0, 0.0, 0.0], [-7.0, 3.0, PI / 2.0], obstacles));
+    assert!(!m.points[0].forward, "the first move is not backwards");
+}
+
+#[test]
+fn a_gate_right_after_a_corner_is_entered() {
+    // Driving east in a 4 m lane, then a 3.2 m gate in a wall to the north 4 m ahead.
+    let mut obstacles = wall((-5.0, -2.0), (12.0, -2.0), 0.2);
+    obstacles.extend(wall((-5.0, 2.0), (3.4, 2.0), 0.2));
+    obstacles.extend(wall((6.6, 2.0), (12.0, 2.0), 0.2));
+    let m = planned(&request([0.0, 0.0, 0.0], [5.0, 7.0, PI / 2.0], obstacles));
+    assert!(m.points.iter().any(|p| p.y > 3.0));
+}
+
+#[test]
+fn an_enclosed_goal_is_unreachable_and_says_so() {
+    let mut obstacles = wall((8.0, -3.0), (14.0, -3.0), 0.2);
+    obstacles.extend(wall((8.0, 3.0), (14.0, 3.0), 0.2));
+    obstacles.extend(wall((8.0, -3.0), (8.0, 3.0), 0.2));
+    obstacles.extend(wall((14.0, -3.0), (14.0, 3.0), 0.2));
+    let req = request([0.0, 0.0, 0.0], [10.0, 0.0, 0.0], obstacles);
+    let (result, _) = req.plan(&req.field());
+    assert_eq!(result, Err(Failure::Unreachable));
+    // A goal the rectangle cannot stand at is refused before any search.
+    let req = request(
+        [0.0, 0.0, 0.0],
+        [10.0, 0.0, 0.0],
+        vec![post(10.5, 0.0, 0.3)],
+    );
+    assert_eq!(req.plan(&req.field()).0, Err(Failure::GoalBlocked));
+}
+
+#[test]
+fn a_moving_obstacle_is_kept_clear_of_along_its_way() {
+    // A cart crossing 6 m ahead from the right at 1.5 m/s: its swept track blocks the
+    // way straight on for the next 3 s.
+    let cart = Circle {
+        vy: 1.5,
+        ..post(6.0, -4.0, 0.8)
+    };
+    let field = request([0.0, 0.0, 0.0], [12.0, 0.0, 0.0], vec![cart]).field();
+    assert!(!field.clear([5.0, 0.0, 0.0]));
+    assert!(field.clear([0.0, 0.0, 0.0]));
+}
+
+#[test]
+fn the_search_is_the_same_every_time() {
+    let mut obstacles = wall((-12.0, 3.0), (7.0, 3.0), 0.2);
+    obstacles.extend(wall((-12.0, -3.0), (7.0, -3.0), 0.2));
+    obstacles.extend(wall((7.0, -3.0), (7.0, 3.0), 0.2));
+    let req = request([0.0, 0.0, 0.0], [-6.0, 0.0, PI], obstacles);
+    let field = req.field();
+    assert_eq!(req.plan(&field), req.plan(&field));
+}

@@ -1,0 +1,348 @@
+//! Space the laser has seen free: every beam marks the cells between the scanner and its
+//! return (or its range, capped) as seen, and the car's own rectangle is seen where it
+//! stands; the cell of each return is remembered as a hit until a beam passes through
+//! it. The laser looks forward, so what lies behind the car is known only from what
+//! it saw before (or from where it drove): a manoeuvre backs only into seen space
+//! (`guidance::manoeuvre`). A world grid of 0.25 m cells, filed in chunks of 8 x 8 m, so
+//! a long route costs memory only where the car has been.
+
+use super::{Beam, Pose2, Scan};
+use std::collections::HashMap;
+
+/// Side of a cell, metres.
+pub const CELL: f64 = 0.25;
+/// Cells per side of a chunk (one row a `u32`).
+const CHUNK: i64 = 32;
+/// A beam marks at most this far, metres (manoeuvres back into what is near).
+const REACH: f64 = 10.0;
+/// Before a return, this much of the beam is not marked (the obstacle's near side).
+const SHORT_OF_HIT: f64 = 0.3;
+/// Beams marked per scan are at least this far apart, radians (1.5 degrees: 0.26 m
+/// apart at the reach).
+const BEAM_SPACING: f64 = 0.026;
+
+/// The seen space.
+#[derive(Clone, Debug, Default)]
+pub struct SeenSpace {
+    chunks: HashMap<(i64, i64), [u32; CHUNK as usize]>,
+    /// Cells a beam returned from (and none has passed through since): what the laser
+    /// saw of the obstacles, remembered once they are out of its view (perception's
+    /// tracks of them are dropped then).
+    hits: HashMap<(i64, i64), [u32; CHUNK as usize]>,
+}
+
+/// SeenSpace space over a window of the world, copied out for one search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SeenWindow {
+    x0: f64,
+    y0: f64,
+    nx: usize,
+    ny: usize,
+    cells: Vec<bool>,
+}
+
+fn cell(x: f64, y: f64) -> (i64, i64) {
+    ((x / CELL).floor() as i64, (y / CELL).floor() as i64)
+}
+
+/// The cells a ray from (x, y) in the direction (c, s) (a unit vector) crosses over
+/// `length` metres, in order, onto `out` (Amanatides and Woo's traversal: one step per
+/// cell, no rounding per point).
+fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64)>) {
+    let (mut i, mut j) = cell(x, y);
+    let last = cell(x + length * c, y + length * s);
+    let axis = |p: f64, d: f64, k: i64| {
+        if d.abs() < 1e-12 {
+            return (0, f64::INFINITY, f64::INFINITY);
+        }
+        let step = if d > 0.0 { 1 } else { -1 };
+        let edge = (k + i64::from(d > 0.0)) as f64 * CELL;
+        (step, (edge - p) / d, CELL / d.abs())
+    };
+    let (si, mut ti, di) = axis(x, c, i);
+    let (sj, mut tj, dj) = axis(y, s, j);
+    // A ray crosses at most this many cells (the guard against rounding at the end).
+    let bound = ((length / CELL) * 2.0).ceil() as usize + 2;
+    for _ in 0..bound {
+        out.push((i, j));
+        if (i, j) == last {
+            break;
+        }
+        if ti < tj {
+            ti += di;
+            i += si;
+        } else {
+            tj += dj;
+            j += sj;
+        }
+    }
+}
+
+type Chunks = HashMap<(i64, i64), [u32; CHUNK as usize]>;
+
+fn set(chunks: &mut Chunks, (i, j): (i64, i64), on: bool) {
+    let key = (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
+    let bit = 1 << i.rem_euclid(CHUNK);
+    let row = j.rem_euclid(CHUNK) as usize;
+    if on {
+        chunks.entry(key).or_insert([0; CHUNK as usize])[row] |= bit;
+    } else if let Some(c) = chunks.get_mut(&key) {
+        c[row] &= !bit;
+    }
+}
+
+fn get(chunks: &Chunks, (i, j): (i64, i64)) -> bool {
+    chunks
+        .get(&(i.div_euclid(CHUNK), j.div_euclid(CHUNK)))
+        .is_some_and(|c| c[j.rem_euclid(CHUNK) as usize] & (1 << i.rem_euclid(CHUNK)) != 0)
+}
+
+impl SeenSpace {
+    /// Cells seen free, in the order of a ray or a row (neighbours mostly share a
+    /// chunk, looked up once for them): no obstacle remembered there either.
+    fn mark_cells(&mut self, cells: &[(i64, i64)]) {
+        let chunk_of = |(i, j): (i64, i64)| (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
+        let mut k = 0;
+        while k < cells.len() {
+            let key = chunk_of(cells[k]);
+            let end = k + cells[k..]
+                .iter()
+                .take_while(|&&c| chunk_of(c) == key)
+                .count();
+            let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
+            for &(i, j) in &cells[k..end] {
+                seen[j.rem_euclid(CHUNK) as usize] |= 1 << i.rem_euclid(CHUNK);
+            }
+            if let Some(hits) = self.hits.get_mut(&key) {
+                for &(i, j) in &cells[k..end] {
+                    hits[j.rem_euclid(CHUNK) as usize] &= !(1 << i.rem_euclid(CHUNK));
+                }
+            }
+            k = end;
+        }
+    }
+
+    fn cell_seen(&self, cell: (i64, i64)) -> bool {
+        get(&self.chunks, cell)
+    }
+
+    /// The centres of the cells beams returned from within `lo`..`hi`.
+    pub fn hits_in(&self, lo: [f64; 2], hi: [f64; 2]) -> Vec<[f64; 2]> {
+        let (i0, j0) = cell(lo[0], lo[1]);
+        let (i1, j1) = cell(hi[0], hi[1]);
+        let mut out = Vec::new();
+        for (&(ci, cj), rows) in &self.hits {
+            let (bi, bj) = (ci * CHUNK, cj * CHUNK);
+            if bi + CHUNK <= i0 || bi > i1 || bj + CHUNK <= j0 || bj > j1 {
+                continue;
+            }
+            for (r, row) in rows.iter().enumerate() {
+                for b in 0..CHUNK {
+                    let (i, j) = (bi + b, bj + r as i64);
+                    if row & (1 << b) != 0 && (i0..=i1).contains(&i) && (j0..=j1).contains(&j) {
+                        out.push([(i as f64 + 0.5) * CELL, (j as f64 + 0.5) * CELL]);
+                    }
+                }
+            }
+        }
+        // The map's order is not the same from run to run: sorted, a search over them
+        // is.
+        out.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+        out
+    }
+
+    /// Whether (x, y) has been seen.
+    pub fn seen(&self, x: f64, y: f64) -> bool {
+        self.cell_seen(cell(x, y))
+    }
+
+    /// Mark what the scan saw, the laser at `laser` (world frame).
+    pub fn update(&mut self, scan: &Scan<'_>, laser: &Pose2) {
+        let n = scan.ranges.len();
+        let every = (BEAM_SPACING / scan.angle_increment.abs().max(1e-6))
+            .ceil()
+            .max(1.0) as usize;
+        let mut ray = Vec::with_capacity(128);
+        for i in (0..n).step_by(every) {
+            let a = laser.yaw + scan.beam_angle(i);
+            let (c, s) = (a.cos(), a.sin());
+            let (reach, hit) = match scan.beam(i) {
+                Beam::Hit(r) if r <= REACH => (r - SHORT_OF_HIT, Some(r)),
+                Beam::Hit(_) => (REACH, None),
+                Beam::NoReturn => (REACH.min(scan.range_max), None),
+                Beam::Dropout => continue,
+            };
+            ray.clear();
+            traverse(laser.x, laser.y, c, s, reach.max(0.0), &mut ray);
+            self.mark_cells(&ray);
+            if let Some(r) = hit {
+                set(&mut self.hits, cell(laser.x + r * c, laser.y + r * s), true);
+            }
+        }
+    }
+
+    /// Mark the rectangle from `back` metres behind the pose (x, y, heading) to `front`
+    /// ahead of it, `half_width` either side: where the car stands (and, at the start,
+    /// the space its operator saw clear behind it).
+    pub fn mark_rectangle(&mut self, pose: [f64; 3], back: f64, front: f64, half_width: f64) {
+        let (c, s) = (pose[2].cos(), pose[2].sin());
+        let nu = ((back + front) / (CELL / 2.0)).ceil() as usize;
+        let nv = (2.0 * half_width / (CELL / 2.0)).ceil() as usize;
+        let mut row = Vec::with_capacity(nv + 1);
+        for a in 0..=nu {
+            let u = -back + (back + front) * a as f64 / nu as f64;
+            row.clear();
+            row.extend((0..=nv).map(|b| {
+                let v = -half_width + 2.0 * half_width * b as f64 / nv as f64;
+                cell(pose[0] + u * c - v * s, pose[1] + u * s + v * c)
+            }));
+            self.mark_cells(&row);
+        }
+    }
+
+    /// The seen space over the window `lo`..`hi`.
+    pub fn window(&self, lo: [f64; 2], hi: [f64; 2]) -> SeenWindow {
+        let (i0, j0) = cell(lo[0], lo[1]);
+        let (i1, j1) = cell(hi[0], hi[1]);
+        let (nx, ny) = ((i1 - i0 + 1).max(1) as usize, (j1 - j0 + 1).max(1) as usize);
+        let mut cells = Vec::with_capacity(nx * ny);
+        for j in j0..j0 + ny as i64 {
+            // Along a row the chunk changes every CHUNK cells: looked up once for them.
+            let mut chunk: Option<(i64, Option<&[u32; CHUNK as usize]>)> = None;
+            for i in i0..i0 + nx as i64 {
+                let ci = i.div_euclid(CHUNK);
+                let rows = match chunk {
+                    Some((at, rows)) if at == ci => rows,
+                    _ => {
+                        let rows = self.chunks.get(&(ci, j.div_euclid(CHUNK)));
+                        chunk = Some((ci, rows));
+                        rows
+                    }
+                };
+                let bit = 1 << i.rem_euclid(CHUNK);
+                cells.push(rows.is_some_and(|r| r[j.rem_euclid(CHUNK) as usize] & bit != 0));
+            }
+        }
+        SeenWindow {
+            x0: i0 as f64 * CELL,
+            y0: j0 as f64 * CELL,
+            nx,
+            ny,
+            cells,
+        }
+    }
+}
+
+impl SeenWindow {
+    /// Whether (x, y) has been seen (outside the window: no).
+    pub fn seen(&self, x: f64, y: f64) -> bool {
+        let i = ((x - self.x0) / CELL).floor();
+        let j = ((y - self.y0) / CELL).floor();
+        i >= 0.0
+            && j >= 0.0
+            && (i as usize) < self.nx
+            && (j as usize) < self.ny
+            && self.cells[j as usize * self.nx + i as usize]
+    }
+}
+
+/// Whether the car's rectangle at `pose` (`front` ahead of it, `rear` behind,
+/// `half_width` either side) lies in seen space, by `seen` at its corners, the middles
+/// of its sides and its centre.
+pub fn rectangle_seen(
+    seen: impl Fn(f64, f64) -> bool,
+    [x, y, theta]: [f64; 3],
+    front: f64,
+    rear: f64,
+    half_width: f64,
+) -> bool {
+    let (c, s) = (theta.cos(), theta.sin());
+    let mid = (front - rear) / 2.0;
+    [-rear, mid, front]
+        .into_iter()
+        .flat_map(|u| [-half_width, 0.0, half_width].map(|v| (u, v)))
+        .all(|(u, v)| seen(x + u * c - v * s, y + u * s + v * c))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_beam_marks_up_to_short_of_its_return_and_nothing_behind_the_laser() {
+        let ranges = [5.0f32, f32::INFINITY, f32::NAN];
+        let scan = Scan {
+            stamp: 0.0,
+            angle_min: 0.0,
+            angle_increment: std::f64::consts::FRAC_PI_2,
+            range_min: 0.1,
+            range_max: 20.0,
+            ranges: &ranges,
+        };
+        let mut seen = SeenSpace::default();
+        seen.update(
+            &scan,
+            &Pose2 {
+                x: 1.0,
+                y: 1.0,
+                yaw: 0.0,
+            },
+        );
+        // East: up to 0.3 m short of the return at x = 6.
+        assert!(seen.seen(2.0, 1.1) && seen.seen(5.5, 1.1));
+        assert!(!seen.seen(6.2, 1.1));
+        // North: no return, marked to the reach.
+        assert!(seen.seen(1.1, 10.5) && !seen.seen(1.1, 11.5));
+        // The return is remembered, until a beam passes through its cell.
+        assert_eq!(seen.hits_in([0.0, 0.0], [10.0, 10.0]), vec![[6.125, 1.125]]);
+        assert!(seen.hits_in([7.0, 0.0], [10.0, 10.0]).is_empty());
+        let far = [9.0f32];
+        let through = Scan {
+            angle_increment: 0.1,
+            ranges: &far,
+            ..scan
+        };
+        seen.update(
+            &through,
+            &Pose2 {
+                x: 1.0,
+                y: 1.1,
+                yaw: 0.0,
+            },
+        );
+        assert!(
+            seen.hits_in([0.0, 0.0], [10.0, 10.0])
+                .iter()
+                .all(|h| h[0] > 9.0)
+        );
+        // West (the dropout) and behind: nothing.
+        assert!(!seen.seen(-1.0, 1.1));
+        let w = seen.window([0.0, 0.0], [8.0, 8.0]);
+        assert!(w.seen(3.0, 1.1) && !w.seen(-1.0, 1.1) && !w.seen(30.0, 1.1));
+    }
+
+    #[test]
+    fn a_ray_crosses_every_cell_on_its_way_once_in_order() {
+        let mut out = Vec::new();
+        traverse(0.1, 0.1, 1.0, 0.0, 1.0, &mut out);
+        assert_eq!(out, vec![(0, 0), (1, 0), (2, 0), (3, 0), (4, 0)]);
+        out.clear();
+        let (c, s) = (-0.6, -0.8);
+        traverse(0.1, 0.1, c, s, 2.0, &mut out);
+        assert_eq!(out.first(), Some(&(0, 0)));
+        assert_eq!(out.last(), Some(&cell(0.1 + 2.0 * c, 0.1 + 2.0 * s)));
+        // Each step moves to a neighbour across one side.
+        assert!(
+            out.windows(2)
+                .all(|w| (w[0].0 - w[1].0).abs() + (w[0].1 - w[1].1).abs() == 1)
+        );
+    }
+
+    #[test]
+    fn the_rectangle_is_marked_turned_with_the_pose() {
+        let mut seen = SeenSpace::default();
+        seen.mark_rectangle([10.0, -10.0, std::f64::consts::FRAC_PI_2], 3.0, 2.0, 0.6);
+        assert!(seen.seen(10.0, -12.9) && seen.seen(10.5, -8.1));
+        assert!(!seen.seen(10.0, -13.4) && !seen.seen(11.0, -10.0));
+    }
+}
