@@ -24,6 +24,7 @@ pub mod suite;
 pub mod sweep;
 pub mod vehicle;
 pub mod verdict;
+pub mod way_through;
 pub mod world;
 
 pub use mode::Mode;

@@ -7,6 +7,7 @@
 //! ugv-sim suite DIR                                                   a folder of scenarios
 //! ugv-sim ecu steering --can vcan1                                    one ECU, standalone
 //! ugv-sim check SCENARIO...                                           validate scenario files
+//! ugv-sim way-through WORLD...                                       is there a way through at all
 //! ```
 //!
 //! Exit codes of `run` ([`RUN_EXIT_CODES`], shown by `run --help`): 0 passed, 1 failed
@@ -115,6 +116,40 @@ enum Command {
         #[arg(required = true)]
         scenarios: Vec<PathBuf>,
     },
+    /// Whether each world has a way through for the car at all: the manoeuvre planner
+    /// run offline on the whole world, at a fine resolution, until every pose it can
+    /// reach is expanded. Prints one line per file and the totals; exit code 0 when
+    /// every world was decided, 1 when a search reached its bound of expansions, 4 on
+    /// an error.
+    WayThrough(WayThroughArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct WayThroughArgs {
+    #[arg(required = true)]
+    scenarios: Vec<PathBuf>,
+    /// Clearance between the car's rectangle and every obstacle, metres.
+    #[arg(long, default_value_t = 0.0, value_parser = number(0.0, 2.0, "m"))]
+    margin: f64,
+    /// The share of the steering lock the search may use.
+    #[arg(long, default_value_t = 1.0, value_parser = number(0.2, 1.0, "of the lock"))]
+    steer_usage: f64,
+    /// Side of a search cell, metres.
+    #[arg(long, default_value_t = 0.1, value_parser = number(0.02, 1.0, "m"))]
+    xy_res: f64,
+    /// Heading cells in a full turn.
+    #[arg(long, default_value_t = 144, value_parser = clap::value_parser!(u16).range(8..=720))]
+    heading_bins: u16,
+    /// Expansions before a world is called undecided.
+    #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u32).range(1..))]
+    expansions: u32,
+    /// Parallel searches (each may take a few GB at the default bound).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
+    jobs: u16,
+    /// Write the stems of the worlds with no way through here, one per line (for
+    /// scripts/barn.py --exclude-list).
+    #[arg(long, value_name = "FILE")]
+    list: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -347,7 +382,56 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Suite(args) => run_suite(args),
         Command::Replay { recording, trace } => replay(&recording, trace.as_deref()),
         Command::Merge { shards, out } => merge_shards(&shards, &out),
+        Command::WayThrough(args) => way_through(&args),
     }
+}
+
+/// `ugv-sim way-through`: search each world, print what was found, write the list.
+fn way_through(args: &WayThroughArgs) -> Result<ExitCode> {
+    use ugv_sim::way_through::{Options, WayThrough};
+    let opts = Options {
+        margin: args.margin,
+        steer_usage: args.steer_usage,
+        xy_res: args.xy_res,
+        heading_bins: usize::from(args.heading_bins),
+        max_expansions: args.expansions as usize,
+    };
+    let results = ugv_sim::way_through::search_all(&args.scenarios, &opts, usize::from(args.jobs))?;
+    let (mut none, mut undecided) = (Vec::new(), 0);
+    for (path, found, wall) in &results {
+        let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+        let what = match found {
+            WayThrough::Found {
+                length,
+                cusps,
+                expansions,
+            } => format!("way through: {length:.2} m, {cusps} cusps ({expansions} expansions)"),
+            WayThrough::None { expansions, why } => {
+                none.push(stem.to_string());
+                format!("NO way through: {why} ({expansions} expansions)")
+            }
+            WayThrough::Undecided { expansions } => {
+                undecided += 1;
+                format!("undecided: {expansions} expansions without the goal")
+            }
+        };
+        println!("{stem}: {what} [{wall:.1} s]");
+    }
+    println!(
+        "{} worlds: {} with a way through, {} with none, {undecided} undecided",
+        results.len(),
+        results.len() - none.len() - undecided,
+        none.len()
+    );
+    if let Some(list) = &args.list {
+        let text: String = none.iter().map(|s| format!("{s}\n")).collect();
+        std::fs::write(list, text).with_context(|| format!("writing {}", list.display()))?;
+    }
+    Ok(if undecided > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 /// Ctrl-C and SIGTERM raise the returned flag.

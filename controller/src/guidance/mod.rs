@@ -996,6 +996,7 @@ impl Navigator {
             decel: self.cfg.follower.decel,
             coast: v.coast_m(pose.v.abs()),
             wheelbase: v.wheelbase,
+            max_steer: v.max_steer_deg.to_radians(),
         };
         let Some(c) = following.command(pose, ahead, &self.law, &pace) else {
             self.manoeuvre = None;

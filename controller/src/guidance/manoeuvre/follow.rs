@@ -14,6 +14,13 @@ use crate::localisation::Pose;
 const END_SLACK: f64 = 0.15;
 /// The nearest point is looked for this many samples ahead of the last one.
 const LOOK_AHEAD: usize = 40;
+/// With the road wheels this far off the command (radians, where they will be when the
+/// command acts) the car goes at its full pace; this far, it stands while they turn (a
+/// driver in a tight place turns the wheels before moving off): at the start of a
+/// segment the wheels may stand at the other lock, and driving on while they turn
+/// carries the car off the manoeuvre towards what it was planned round.
+const STEER_GAP_FULL: f64 = 4.0 * std::f64::consts::PI / 180.0;
+const STEER_GAP_STAND: f64 = 12.0 * std::f64::consts::PI / 180.0;
 
 /// What following asks of the actuators.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,7 +49,8 @@ pub struct Following {
 }
 
 /// How following is tuned: speeds (magnitudes), the deceleration to stop at a segment's
-/// end, the distance the speed loop rolls on after a stop command, and the wheelbase.
+/// end, the distance the speed loop rolls on after a stop command, the wheelbase and
+/// the steering lock (radians).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pace {
     pub forward_speed: f64,
@@ -50,6 +58,7 @@ pub struct Pace {
     pub decel: f64,
     pub coast: f64,
     pub wheelbase: f64,
+    pub max_steer: f64,
 }
 
 impl Following {
@@ -111,10 +120,11 @@ impl Following {
                     pace.reverse_speed
                 };
                 let stop = (2.0 * pace.decel * (left - pace.coast).max(0.0)).sqrt();
+                let gap = steer.clamp(-pace.max_steer, pace.max_steer) - ahead.phi;
                 return Some(Command {
                     forward,
                     steer,
-                    speed: cruise.min(stop),
+                    speed: cruise.min(stop) * steer_ready(gap),
                     room: left,
                     inputs,
                 });
@@ -134,6 +144,12 @@ impl Following {
             self.at = range.end;
         }
     }
+}
+
+/// The share of the pace allowed with the road wheels `gap` radians off the command:
+/// all of it within [`STEER_GAP_FULL`], none beyond [`STEER_GAP_STAND`].
+fn steer_ready(gap: f64) -> f64 {
+    ((STEER_GAP_STAND - gap.abs()) / (STEER_GAP_STAND - STEER_GAP_FULL)).clamp(0.0, 1.0)
 }
 
 /// The index of the sample of `points` (the first at `offset` in the manoeuvre) nearest
@@ -188,18 +204,25 @@ mod tests {
         decel: 1.0,
         coast: 0.0,
         wheelbase: 1.65,
+        max_steer: 0.61,
     };
 
     /// Drive the car (kinematic bicycle, commands acting at once) along `m` until it
     /// finishes or `limit` steps pass; the poses driven.
     fn drive(m: Manoeuvre, limit: usize) -> (Following, Vec<Pose>) {
+        drive_steering(m, limit, 0.0, f64::INFINITY)
+    }
+
+    /// As [`drive`], the road wheels starting at `phi` and turning at most `rate`
+    /// radians per second.
+    fn drive_steering(m: Manoeuvre, limit: usize, phi: f64, rate: f64) -> (Following, Vec<Pose>) {
         let mut f = Following::new(m);
         let mut pose = Pose {
             x: 0.0,
             y: 0.0,
             theta: 0.0,
             v: 0.0,
-            phi: 0.0,
+            phi,
         };
         let mut poses = Vec::new();
         let dt = 0.01;
@@ -213,7 +236,8 @@ mod tests {
             if c.speed == 0.0 && pose.v.abs() < 0.02 {
                 pose.v = 0.0;
             }
-            pose.phi = c.steer.clamp(-0.61, 0.61);
+            let turn = c.steer.clamp(-0.61, 0.61) - pose.phi;
+            pose.phi += turn.clamp(-rate * dt, rate * dt);
             let p = arc(
                 [pose.x, pose.y, pose.theta],
                 pose.v * dt,
@@ -276,5 +300,32 @@ mod tests {
         let last = poses[poses.len() - 1];
         assert!(last.x < -5.0, "{last:?}");
         assert!((last.y + 0.3).abs() < 0.1, "{last:?}");
+    }
+
+    #[test]
+    fn the_wheels_are_turned_before_the_car_moves_off_along_a_tight_arc() {
+        // A left arc near the planned lock, the wheels at the right lock when it begins
+        // and turning at 60 deg/s: driving off at once would carry the car 0.3 m outside
+        // the arc before they are round (as a car ran 0.05 m from a wall's corner).
+        let m = sampled([0.0, 0.0, 0.0], &[(3.0, 0.32)]);
+        let (f, poses) = drive_steering(m.clone(), 2000, -0.55, 60f64.to_radians());
+        assert!(f.finished());
+        let off = poses
+            .iter()
+            .map(|p| {
+                std::iter::once((0.0, 0.0))
+                    .chain(m.points.iter().map(|q| (q.x, q.y)))
+                    .map(|(x, y)| (x - p.x).hypot(y - p.y))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max);
+        assert!(off < 0.08, "{off}");
+        // It stood while the wheels turned.
+        let moved_at = poses.iter().position(|p| p.v.abs() > 0.01).expect("moves");
+        assert!(
+            poses[moved_at].phi > 0.3 - 12f64.to_radians(),
+            "{:?}",
+            poses[moved_at]
+        );
     }
 }
