@@ -105,7 +105,8 @@ impl ManoeuvreRequest {
         let (lo, hi) = self.window();
         // An obstacle the car already stands within the margin of is planned as just
         // clear of where it stands (as the passages' check does), so a manoeuvre may lead
-        // away from it.
+        // away from it: its radius shrinks, below zero if need be (a disc's radius plus
+        // the margin is the clearance the rectangle keeps from its centre).
         let [x, y, theta] = self.start;
         let f = &self.footprint;
         let cell = crate::perception::SEEN_CELL * std::f64::consts::FRAC_1_SQRT_2;
@@ -118,8 +119,9 @@ impl ManoeuvreRequest {
             .into_iter()
             .chain(remembered)
             .map(|d| Disc {
-                r: d.r
-                    .min((f.distance(x, y, theta, d.x, d.y) - f.margin - START_SLACK).max(0.0)),
+                r: d.r.min(
+                    (f.distance(x, y, theta, d.x, d.y) - f.margin - START_SLACK).max(-f.margin),
+                ),
                 ..d
             })
             .collect();

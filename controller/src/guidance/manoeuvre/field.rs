@@ -16,7 +16,9 @@ const BUCKET: f64 = 2.0;
 /// Discs covering the rectangle along its axis for the quick check.
 const COVER: usize = 3;
 
-/// An obstacle as the manoeuvre planner sees it: a disc, world frame.
+/// An obstacle as the manoeuvre planner sees it: a disc, world frame. The rectangle
+/// keeps `r` plus its margin from the centre; `r` is negative for an obstacle the car
+/// already stands nearer than the margin (`ManoeuvreRequest::field`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Disc {
     pub x: f64,

@@ -104,6 +104,22 @@ fn a_car_parked_nose_in_backs_out_first() {
 }
 
 #[test]
+fn a_car_standing_nearer_a_post_than_the_margin_drives_away_from_it() {
+    // A thin post (a remembered laser return's size) 0.1 m from the car's left side
+    // (the margin is 0.15 m): the search starts (it found nothing, "start blocked",
+    // whenever the car stood within the margin plus the start's slack of a centre) and
+    // never takes the car nearer the post.
+    let p = post(1.0, 0.73, 0.03);
+    let m = planned(&request([0.0, 0.0, 0.0], [10.0, 0.0, 0.0], vec![p]));
+    let nearest = m
+        .points
+        .iter()
+        .map(|q| CAR.distance(q.x, q.y, q.theta, p.x, p.y) - p.radius)
+        .fold(f64::INFINITY, f64::min);
+    assert!(nearest >= 0.1 - START_SLACK - 1e-9, "{nearest}");
+}
+
+#[test]
 fn a_gate_right_after_a_corner_is_entered() {
     // Driving east in a 4 m lane, then a 3.2 m gate in a wall to the north 4 m ahead.
     let mut obstacles = wall((-5.0, -2.0), (12.0, -2.0), 0.2);
