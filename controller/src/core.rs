@@ -112,6 +112,35 @@ pub struct Sample {
     pub speed_cmd: f64,
 }
 
+/// What one tick asks of the actuators.
+#[derive(Clone, Copy, Debug)]
+struct Demand {
+    /// The heartbeat's state.
+    state: ControllerHeartbeatState,
+    /// The steering's enable, and its angle, degrees.
+    steer: (bool, f64),
+    /// The throttle's enable, its speed (m/s) and the brake (percent).
+    drive: (bool, f64, f64),
+    /// Forward, but for a reversal.
+    gear: ThrottleCmdGear,
+}
+
+impl Demand {
+    /// `state`, `steer` and `drive` in forward gear.
+    fn forward(
+        state: ControllerHeartbeatState,
+        steer: (bool, f64),
+        drive: (bool, f64, f64),
+    ) -> Demand {
+        Demand {
+            state,
+            steer,
+            drive,
+            gear: ThrottleCmdGear::Forward,
+        }
+    }
+}
+
 /// Replanning on a thread of its own, so the 10 ms command loop never waits for it.
 #[derive(Debug)]
 struct PlanWorker {
@@ -590,117 +619,126 @@ impl Controller {
 
     /// Advance the mode machine and return the messages due at `now`.
     pub fn tick(&mut self, now: f64) -> Vec<GolfCarMessage> {
-        let v = self.cfg.vehicle.clone();
-        let limit = v.max_steer_deg.min(45.0);
         self.advance_mode(now);
 
         // What to ask of the actuators.
         let hold = self.measured_angle();
-        // Forward, but for a reversal.
-        let mut gear = ThrottleCmdGear::Forward;
-        // (heartbeat, (steering enable, angle deg), (throttle enable, speed, brake %))
-        let (state, steer, drive): (ControllerHeartbeatState, (bool, f64), (bool, f64, f64)) =
-            match self.mode.clone() {
-                Mode::WaitingForSensors => (
-                    ControllerHeartbeatState::Idle,
-                    (false, hold),
-                    (false, 0.0, 100.0),
-                ),
-                Mode::Enabling { since } => {
-                    let enable = now - since >= ENABLE_LOW;
-                    (
+        let demand = match self.mode.clone() {
+            Mode::WaitingForSensors => Demand::forward(
+                ControllerHeartbeatState::Idle,
+                (false, hold),
+                (false, 0.0, 100.0),
+            ),
+            Mode::Enabling { since } => {
+                let enable = now - since >= ENABLE_LOW;
+                Demand::forward(
+                    ControllerHeartbeatState::Auto,
+                    (enable, hold),
+                    (enable, 0.0, 100.0),
+                )
+            }
+            Mode::Auto => self.auto_demand(now, hold),
+            Mode::Arrived { stopped } => self.arrived_demand(stopped, hold),
+            Mode::Estop { .. } => Demand::forward(
+                ControllerHeartbeatState::Estop,
+                (false, hold),
+                (false, 0.0, 100.0),
+            ),
+        };
+
+        self.messages(now, demand, hold)
+    }
+
+    /// What to ask of the actuators in auto at `now`: what guidance says from the
+    /// car's pose (the brake half on while there is none); the wheels held at `hold`
+    /// while stopping.
+    fn auto_demand(&mut self, now: f64, hold: f64) -> Demand {
+        let v = &self.cfg.vehicle;
+        let limit = v.max_steer_deg.min(45.0);
+        let top_speed = v.max_speed.min(10.0);
+        let Some(pose) = self.loc.predict(now) else {
+            return Demand::forward(
+                ControllerHeartbeatState::Auto,
+                (true, hold),
+                (true, 0.0, 50.0),
+            );
+        };
+        match self.plan_and_follow(now, &pose, &self.ahead(now, &pose)) {
+            Guidance::Drive {
+                steer,
+                speed,
+                room,
+                inputs,
+            } => {
+                self.stop_reason = None;
+                let wanted = steer.to_degrees().clamp(-limit, limit);
+                // The wheels stand at the reported angle plus the bias.
+                let steer_deg = (wanted - self.loc.steer_bias().to_degrees()).clamp(-limit, limit);
+                let speed = speed.clamp(0.0, top_speed);
+                self.samples.push(Sample {
+                    t: now,
+                    pose,
+                    inputs,
+                    steer_cmd: wanted.to_radians(),
+                    speed_cmd: speed,
+                });
+                let brake = stop_brake(self.speed(), room, &self.cfg);
+                Demand::forward(
+                    ControllerHeartbeatState::Auto,
+                    (true, steer_deg),
+                    (true, speed, brake),
+                )
+            }
+            Guidance::Reverse { steer, speed } => {
+                self.stop_reason = None;
+                let steer_deg = steer.to_degrees().clamp(-limit, limit);
+                Demand {
+                    gear: ThrottleCmdGear::Reverse,
+                    ..Demand::forward(
                         ControllerHeartbeatState::Auto,
-                        (enable, hold),
-                        (enable, 0.0, 100.0),
+                        (true, steer_deg),
+                        (true, speed.clamp(0.0, top_speed), 0.0),
                     )
                 }
-                Mode::Auto => match self.loc.predict(now) {
-                    None => (
-                        ControllerHeartbeatState::Auto,
-                        (true, hold),
-                        (true, 0.0, 50.0),
-                    ),
-                    Some(pose) => match self.plan_and_follow(now, &pose, &self.ahead(now, &pose)) {
-                        Guidance::Drive {
-                            steer,
-                            speed,
-                            room,
-                            inputs,
-                        } => {
-                            self.stop_reason = None;
-                            let wanted = steer.to_degrees().clamp(-limit, limit);
-                            // The wheels stand at the reported angle plus the bias.
-                            let steer_deg =
-                                (wanted - self.loc.steer_bias().to_degrees()).clamp(-limit, limit);
-                            let speed = speed.clamp(0.0, v.max_speed.min(10.0));
-                            self.samples.push(Sample {
-                                t: now,
-                                pose,
-                                inputs,
-                                steer_cmd: wanted.to_radians(),
-                                speed_cmd: speed,
-                            });
-                            let brake = stop_brake(self.speed(), room, &self.cfg);
-                            (
-                                ControllerHeartbeatState::Auto,
-                                (true, steer_deg),
-                                (true, speed, brake),
-                            )
-                        }
-                        Guidance::Reverse { steer, speed } => {
-                            self.stop_reason = None;
-                            gear = ThrottleCmdGear::Reverse;
-                            let steer_deg = steer.to_degrees().clamp(-limit, limit);
-                            (
-                                ControllerHeartbeatState::Auto,
-                                (true, steer_deg),
-                                (true, speed.clamp(0.0, v.max_speed.min(10.0)), 0.0),
-                            )
-                        }
-                        Guidance::Stop { reason } => {
-                            self.stop_reason = Some(reason);
-                            (
-                                ControllerHeartbeatState::Auto,
-                                (true, hold),
-                                (true, 0.0, 40.0),
-                            )
-                        }
-                        Guidance::Arrived => {
-                            self.mode = Mode::Arrived { stopped: false };
-                            (
-                                ControllerHeartbeatState::Auto,
-                                (true, hold),
-                                (true, 0.0, 60.0),
-                            )
-                        }
-                    },
-                },
-                Mode::Arrived { stopped } => {
-                    if !stopped && self.speed().abs() < STOPPED {
-                        self.mode = Mode::Arrived { stopped: true };
-                    }
-                    if stopped {
-                        (
-                            ControllerHeartbeatState::Idle,
-                            (false, hold),
-                            (false, 0.0, 100.0),
-                        )
-                    } else {
-                        (
-                            ControllerHeartbeatState::Auto,
-                            (true, hold),
-                            (true, 0.0, 60.0),
-                        )
-                    }
-                }
-                Mode::Estop { .. } => (
-                    ControllerHeartbeatState::Estop,
-                    (false, hold),
-                    (false, 0.0, 100.0),
-                ),
-            };
+            }
+            Guidance::Stop { reason } => {
+                self.stop_reason = Some(reason);
+                Demand::forward(
+                    ControllerHeartbeatState::Auto,
+                    (true, hold),
+                    (true, 0.0, 40.0),
+                )
+            }
+            Guidance::Arrived => {
+                self.mode = Mode::Arrived { stopped: false };
+                Demand::forward(
+                    ControllerHeartbeatState::Auto,
+                    (true, hold),
+                    (true, 0.0, 60.0),
+                )
+            }
+        }
+    }
 
-        self.messages(now, state, steer, drive, gear, hold)
+    /// What to ask of the actuators once arrived: brake to a stop (the wheels held at
+    /// `hold`), then idle with the ECUs disabled.
+    fn arrived_demand(&mut self, stopped: bool, hold: f64) -> Demand {
+        if !stopped && self.speed().abs() < STOPPED {
+            self.mode = Mode::Arrived { stopped: true };
+        }
+        if stopped {
+            Demand::forward(
+                ControllerHeartbeatState::Idle,
+                (false, hold),
+                (false, 0.0, 100.0),
+            )
+        } else {
+            Demand::forward(
+                ControllerHeartbeatState::Auto,
+                (true, hold),
+                (true, 0.0, 60.0),
+            )
+        }
     }
 
     /// The mode machine's transitions at `now`: start-up (sensors, the first plan,
@@ -741,17 +779,15 @@ impl Controller {
         }
     }
 
-    /// The messages due at `now` for what is asked of the actuators: the heartbeat,
+    /// The messages due at `now` for what `demand` asks of the actuators: the heartbeat,
     /// the commands and, in estop, the FAULT_REPORT; the monitors see them.
-    fn messages(
-        &mut self,
-        now: f64,
-        state: ControllerHeartbeatState,
-        steer: (bool, f64),
-        drive: (bool, f64, f64),
-        gear: ThrottleCmdGear,
-        hold: f64,
-    ) -> Vec<GolfCarMessage> {
+    fn messages(&mut self, now: f64, demand: Demand, hold: f64) -> Vec<GolfCarMessage> {
+        let Demand {
+            state,
+            steer,
+            drive,
+            gear,
+        } = demand;
         let v = &self.cfg.vehicle;
         let limit = v.max_steer_deg.min(45.0);
         let mut out = Vec::new();

@@ -12,8 +12,8 @@
 //! (estop: ended by a signal while in estop, or a port lost, after the estop went
 //! out), 3 ended by a signal, 4 error (including the CAN port failing mid-run).
 
-use std::io::{IsTerminal, Read};
-use std::path::PathBuf;
+use std::io::{IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -29,7 +29,7 @@ use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
 use ugv_controller::record::{RunInfo, Writer};
-use ugv_controller::runtime::{Runtime, SIMULATOR_PID_ENV};
+use ugv_controller::runtime::{Exit, GpsInput, LaserInput, Runtime, SIMULATOR_PID_ENV};
 use ugv_controller::trace::TraceWriter;
 
 #[derive(Parser, Debug)]
@@ -215,51 +215,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+/// `ugv-controller run`: drive the mission on the real ports until it ends, is stopped
+/// or a port fails; the exit code says which.
 fn drive(args: RunArgs) -> Result<ExitCode> {
-    let mut cfg = match &args.config {
-        Some(p) => ControllerConfig::load(p)?,
-        None => ControllerConfig::default(),
-    };
-    if let Some(kind) = args.follower {
-        cfg.follower.kind = kind;
-    }
-    if let Some(model) = &args.anfis_model {
-        cfg.follower.anfis_model = Some(model.clone());
-    }
-    anyhow::ensure!(
-        args.status_every.is_finite() && (0.0..=3600.0).contains(&args.status_every),
-        "--status-every must be within [0, 3600] s, is {}",
-        args.status_every
-    );
+    let cfg = run_config(&args)?;
     // The same checks as check-config: the configuration's, then the controller's own.
     let ctl = Controller::new(&cfg)?
         .with_planning_thread()
         .context("starting the planning thread")?;
-    let create =
-        |p: &PathBuf| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
-    let trace = match (&args.trace, &args.record) {
-        (None, None) => None,
-        (trace, record) => Some(
-            TraceWriter::new(
-                trace.as_ref().map(create).transpose()?,
-                record.as_ref().map(create).transpose()?,
-            )
-            .context("writing the trace")?,
-        ),
-    };
-    let can = CanPort::open(&args.can)?;
-    ugv_controller::runtime::accept_controller_ids(&can)?;
-    let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
-    let gps = NmeaLink::new(port, ReaderConfig::default());
-    let laser = LaserSubscriber::new(&args.laser)?;
-    eprintln!(
-        "ugv-controller: GPS {} at {} baud, laser {}, CAN {}, follower {:?}",
-        args.gps.display(),
-        args.baud,
-        args.laser,
-        args.can,
-        cfg.follower.kind
-    );
+    let trace = trace_writer(&args)?;
+    let (can, gps, laser) = open_ports(&args, &cfg)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
@@ -277,39 +242,145 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         rt_sched.promotion.describe("ugv-controller: command loop")
     );
     if let Some(dir) = &args.log {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("--log: creating {}", dir.display()))?;
-        let info = RunInfo::field(
-            args.config.as_ref().map_or_else(
-                || "the paper's mission (default configuration)".to_owned(),
-                |p| p.display().to_string(),
-            ),
-            // The loop's t = 0: its clock starts below.
-            firmware_bridge::clock::unix_ns(std::time::SystemTime::now()),
-            args.can.clone(),
-            ReaderConfig::default().complete_when,
-            args.baud,
-            &cfg,
-        )?;
-        let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
-            .with_context(|| format!("--log: recording into {}", dir.display()))?;
-        rt = rt
-            .with_recorder(writer)
-            .context("--log: starting the recorder's thread")?;
+        rt = with_log(rt, dir, &args, &cfg)?;
     }
     let mut clock = WallClock::new(COMMAND_PERIOD);
-    let status_ticks = (args.status_every / COMMAND_PERIOD).round() as u64;
-    let tty = std::io::stderr().is_terminal();
-    let clear = if tty { "\r\x1b[2K" } else { "" };
-    // Every change of mode, and of stopping or moving on, is logged as it happens,
-    // status lines or not: the log of a controller on its own board says when and why
-    // it stopped. A stop reason whose wording changes (a distance in it) is logged
-    // again at most once a second.
-    let mut logged: Option<(Mode, Option<String>, f64)> = None;
+    let mut log = LoopLog::new(args.status_every);
     let exit = rt.run(&mut clock, &stop, |k, now, rt| {
-        let ctl = rt.controller();
+        log.tick(k, now, rt.controller());
+    });
+    if log.tty {
+        eprintln!();
+    }
+    report_end(&mut rt, &exit);
+    Ok(ExitCode::from(exit.code()))
+}
+
+/// The configuration `ugv-controller run` drives with: the file's (the paper's mission
+/// without one) with the command line's follower and model; `--status-every` checked.
+fn run_config(args: &RunArgs) -> Result<ControllerConfig> {
+    let mut cfg = match &args.config {
+        Some(p) => ControllerConfig::load(p)?,
+        None => ControllerConfig::default(),
+    };
+    if let Some(kind) = args.follower {
+        cfg.follower.kind = kind;
+    }
+    if let Some(model) = &args.anfis_model {
+        cfg.follower.anfis_model = Some(model.clone());
+    }
+    anyhow::ensure!(
+        args.status_every.is_finite() && (0.0..=3600.0).contains(&args.status_every),
+        "--status-every must be within [0, 3600] s, is {}",
+        args.status_every
+    );
+    Ok(cfg)
+}
+
+/// The writer of `--trace` and `--record`, their files created (none without either).
+fn trace_writer(args: &RunArgs) -> Result<Option<TraceWriter>> {
+    let create =
+        |p: &PathBuf| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
+    Ok(match (&args.trace, &args.record) {
+        (None, None) => None,
+        (trace, record) => Some(
+            TraceWriter::new(
+                trace.as_ref().map(create).transpose()?,
+                record.as_ref().map(create).transpose()?,
+            )
+            .context("writing the trace")?,
+        ),
+    })
+}
+
+/// The controller's ports, opened: the actuators' CAN bus (with its acceptance
+/// filter), the GPS line and the laser service; said on stderr.
+fn open_ports(
+    args: &RunArgs,
+    cfg: &ControllerConfig,
+) -> Result<(CanPort, NmeaLink<impl Read + Write>, LaserSubscriber)> {
+    let can = CanPort::open(&args.can)?;
+    ugv_controller::runtime::accept_controller_ids(&can)?;
+    let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
+    let gps = NmeaLink::new(port, ReaderConfig::default());
+    let laser = LaserSubscriber::new(&args.laser)?;
+    eprintln!(
+        "ugv-controller: GPS {} at {} baud, laser {}, CAN {}, follower {:?}",
+        args.gps.display(),
+        args.baud,
+        args.laser,
+        args.can,
+        cfg.follower.kind
+    );
+    Ok((can, gps, laser))
+}
+
+/// `rt` recording its ports into `dir` (`--log`), the folder created; the recording's
+/// start is now, the loop's t = 0.
+fn with_log<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
+    rt: Runtime<G, L, B>,
+    dir: &Path,
+    args: &RunArgs,
+    cfg: &ControllerConfig,
+) -> Result<Runtime<G, L, B>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("--log: creating {}", dir.display()))?;
+    let info = RunInfo::field(
+        args.config.as_ref().map_or_else(
+            || "the paper's mission (default configuration)".to_owned(),
+            |p| p.display().to_string(),
+        ),
+        // The loop's t = 0: its clock starts next.
+        firmware_bridge::clock::unix_ns(std::time::SystemTime::now()),
+        args.can.clone(),
+        ReaderConfig::default().complete_when,
+        args.baud,
+        cfg,
+    )?;
+    let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
+        .with_context(|| format!("--log: recording into {}", dir.display()))?;
+    rt.with_recorder(writer)
+        .context("--log: starting the recorder's thread")
+}
+
+/// The command loop's lines on stderr. Every change of mode, and of stopping or moving
+/// on, is logged as it happens, status lines or not: the log of a controller on its own
+/// board says when and why it stopped. A stop reason whose wording changes (a distance
+/// in it) is logged again at most once a second.
+#[derive(Debug)]
+struct LoopLog {
+    /// Ticks between status lines (0: none).
+    status_ticks: u64,
+    /// Stderr is a terminal: the status line is redrawn in place.
+    tty: bool,
+    /// The mode, stop reason and time last logged.
+    logged: Option<(Mode, Option<String>, f64)>,
+}
+
+impl LoopLog {
+    /// A status line every `status_every` seconds (0: none).
+    fn new(status_every: f64) -> LoopLog {
+        LoopLog {
+            status_ticks: (status_every / COMMAND_PERIOD).round() as u64,
+            tty: std::io::stderr().is_terminal(),
+            logged: None,
+        }
+    }
+
+    /// Tick `k` at `now`: a change of `ctl`'s mode or stop, then the status line when
+    /// one is due.
+    fn tick(&mut self, k: u64, now: f64, ctl: &Controller) {
+        self.changes(now, ctl);
+        if self.status_ticks == 0 || !k.is_multiple_of(self.status_ticks) {
+            return;
+        }
+        self.status(now, ctl);
+    }
+
+    /// Log the mode and stop reason when they changed since last logged.
+    fn changes(&mut self, now: f64, ctl: &Controller) {
+        let clear = if self.tty { "\r\x1b[2K" } else { "" };
         let reason = ctl.stop_reason();
-        if logged.as_ref().is_none_or(|(mode, was, at)| {
+        if self.logged.as_ref().is_none_or(|(mode, was, at)| {
             mode != ctl.mode()
                 || was.is_some() != reason.is_some()
                 || (was.as_deref() != reason && now - at >= 1.0)
@@ -321,11 +392,12 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
                     .map(|r| format!(", stopped: {r}"))
                     .unwrap_or_default()
             );
-            logged = Some((ctl.mode().clone(), reason.map(str::to_owned), now));
+            self.logged = Some((ctl.mode().clone(), reason.map(str::to_owned), now));
         }
-        if status_ticks == 0 || k % status_ticks != 0 {
-            return;
-        }
+    }
+
+    /// The status line: the mode, the pose and the obstacles at `now`.
+    fn status(&self, now: f64, ctl: &Controller) {
         let line = match ctl.pose(now) {
             Some(p) => format!(
                 "t={now:7.2}s {:?} x={:7.2} y={:7.2} hdg={:6.1}° v={:4.2} obstacles={} {}",
@@ -339,15 +411,20 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
             ),
             None => format!("t={now:7.2}s {:?} (no position yet)", ctl.mode()),
         };
-        if tty {
+        if self.tty {
             eprint!("\r\x1b[2K{line}");
         } else {
             eprintln!("{line}");
         }
-    });
-    if tty {
-        eprintln!();
     }
+}
+
+/// How the run ended, on stderr: the exit, the mode, the CAN and input counts, and the
+/// trace's and the recording's state.
+fn report_end<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
+    rt: &mut Runtime<G, L, B>,
+    exit: &Exit,
+) {
     eprintln!(
         "ugv-controller: {exit:?}; {:?}; CAN {:?}; inputs {:?}; ticks skipped late {}",
         rt.controller().mode(),
@@ -364,7 +441,6 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
             ugv_controller::record::describe(&summary)
         );
     }
-    Ok(ExitCode::from(exit.code()))
 }
 
 /// A controller the simulator started (its pid in [`SIMULATOR_PID_ENV`]) ends with it:

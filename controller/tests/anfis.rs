@@ -868,16 +868,10 @@ t, x ,\"y\",label
         Ok(())
     }
 
-    #[test]
-    fn train_args_refuse_huge_epochs_mfs_and_rule_grids_before_reading_the_data() -> Result<()> {
-        // The data file does not exist: the numbers are refused before it is read.
-        let base = TrainArgs::new(
-            temp_path("never-read.csv"),
-            names(&["e_y", "e_theta", "phi_ref"]),
-            "steer_cmd".into(),
-            temp_path("never-written.json"),
-        );
-        let cases: Vec<(&str, TrainArgs)> = vec![
+    /// `base` with its epochs, membership functions or step size each out of bounds,
+    /// beside the field the refusal names.
+    fn out_of_bounds(base: &TrainArgs) -> Vec<(&'static str, TrainArgs)> {
+        vec![
             (
                 "epochs",
                 TrainArgs {
@@ -955,7 +949,19 @@ t, x ,\"y\",label
                     ..base.clone()
                 },
             ),
-        ];
+        ]
+    }
+
+    #[test]
+    fn train_args_refuse_huge_epochs_mfs_and_rule_grids_before_reading_the_data() -> Result<()> {
+        // The data file does not exist: the numbers are refused before it is read.
+        let base = TrainArgs::new(
+            temp_path("never-read.csv"),
+            names(&["e_y", "e_theta", "phi_ref"]),
+            "steer_cmd".into(),
+            temp_path("never-written.json"),
+        );
+        let cases = out_of_bounds(&base);
         for (field, args) in cases {
             for result in [args.validate(), train_command(&args).map(|_| ())] {
                 match result {

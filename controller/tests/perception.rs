@@ -1184,109 +1184,7 @@ mod perception {
         let pose = Pose2::new(0.0, 0.0, 0.0);
         let ranges = vec![5.0f32; 541];
         let good = LMS111.scan(1.0, &ranges);
-        let check = |scan: Scan<'_>, what: &str| {
-            let err = detect(&scan, &mount, &pose, &cfg).expect_err(what);
-            eprintln!("{what}: {err}");
-            err
-        };
-        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
-            let e = check(
-                Scan {
-                    angle_increment: bad,
-                    ..good
-                },
-                "non-finite angle_increment",
-            );
-            assert!(matches!(
-                e,
-                PerceptionError::NonFinite {
-                    field: "angle_increment",
-                    ..
-                }
-            ));
-        }
-        assert!(matches!(
-            check(
-                Scan {
-                    angle_increment: 0.0,
-                    ..good
-                },
-                "zero increment"
-            ),
-            PerceptionError::ZeroAngleIncrement { beams: 541 }
-        ));
-        assert!(matches!(
-            check(
-                Scan {
-                    angle_min: f64::NAN,
-                    ..good
-                },
-                "NaN angle_min"
-            ),
-            PerceptionError::NonFinite {
-                field: "angle_min",
-                ..
-            }
-        ));
-        assert!(matches!(
-            check(
-                Scan {
-                    stamp: f64::NAN,
-                    ..good
-                },
-                "NaN stamp"
-            ),
-            PerceptionError::NonFinite { field: "stamp", .. }
-        ));
-        assert!(matches!(
-            check(
-                Scan {
-                    range_min: 5.0,
-                    range_max: 1.0,
-                    ..good
-                },
-                "range limits"
-            ),
-            PerceptionError::InvalidRangeLimits { .. }
-        ));
-        assert!(matches!(
-            check(
-                Scan {
-                    range_min: -1.0,
-                    ..good
-                },
-                "negative range_min"
-            ),
-            PerceptionError::InvalidRangeLimits { .. }
-        ));
-        // 800 ranges at 0.5 degrees: 399.5 degrees, more beams than the increment allows.
-        let long = vec![5.0f32; 800];
-        assert!(matches!(
-            check(
-                Scan {
-                    ranges: &long,
-                    ..good
-                },
-                "ranges vs increment"
-            ),
-            PerceptionError::BeamCountMismatch { beams: 800, .. }
-        ));
-        // A full revolution is fine: 720 beams of 0.5 degrees.
-        let full = vec![5.0f32; 720];
-        assert!(
-            detect(
-                &Scan {
-                    ranges: &full,
-                    ..good
-                },
-                &mount,
-                &pose,
-                &cfg
-            )
-            .is_ok()
-        );
-
-        // Poses.
+        // Poses (the scans' own checks: the two tests below).
         let e = detect(&good, &Pose2::new(f64::NAN, 0.0, 0.0), &pose, &cfg).expect_err("mount");
         assert!(matches!(
             e,
@@ -1345,6 +1243,134 @@ mod perception {
             assert!(matches!(e, PerceptionError::InvalidConfig { .. }), "{e}");
             assert!(detect(&good, &mount, &pose, &bad).is_err());
         }
+    }
+
+    /// A scan with a non-finite or zero angle increment, angle_min or stamp is refused,
+    /// the field named.
+    #[test]
+    fn malformed_scan_fields_are_errors() {
+        let cfg = PerceptionConfig::default();
+        let mount = default_mount();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let ranges = vec![5.0f32; 541];
+        let good = LMS111.scan(1.0, &ranges);
+        let check = |scan: Scan<'_>, what: &str| {
+            let err = detect(&scan, &mount, &pose, &cfg).expect_err(what);
+            eprintln!("{what}: {err}");
+            err
+        };
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let e = check(
+                Scan {
+                    angle_increment: bad,
+                    ..good
+                },
+                "non-finite angle_increment",
+            );
+            assert!(matches!(
+                e,
+                PerceptionError::NonFinite {
+                    field: "angle_increment",
+                    ..
+                }
+            ));
+        }
+        assert!(matches!(
+            check(
+                Scan {
+                    angle_increment: 0.0,
+                    ..good
+                },
+                "zero increment"
+            ),
+            PerceptionError::ZeroAngleIncrement { beams: 541 }
+        ));
+        assert!(matches!(
+            check(
+                Scan {
+                    angle_min: f64::NAN,
+                    ..good
+                },
+                "NaN angle_min"
+            ),
+            PerceptionError::NonFinite {
+                field: "angle_min",
+                ..
+            }
+        ));
+        assert!(matches!(
+            check(
+                Scan {
+                    stamp: f64::NAN,
+                    ..good
+                },
+                "NaN stamp"
+            ),
+            PerceptionError::NonFinite { field: "stamp", .. }
+        ));
+    }
+
+    /// A scan with range limits out of order or negative, or more beams than its
+    /// increment allows, is refused; a full revolution is not.
+    #[test]
+    fn scan_range_limits_and_beam_counts_are_checked() {
+        let cfg = PerceptionConfig::default();
+        let mount = default_mount();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let ranges = vec![5.0f32; 541];
+        let good = LMS111.scan(1.0, &ranges);
+        let check = |scan: Scan<'_>, what: &str| {
+            let err = detect(&scan, &mount, &pose, &cfg).expect_err(what);
+            eprintln!("{what}: {err}");
+            err
+        };
+        assert!(matches!(
+            check(
+                Scan {
+                    range_min: 5.0,
+                    range_max: 1.0,
+                    ..good
+                },
+                "range limits"
+            ),
+            PerceptionError::InvalidRangeLimits { .. }
+        ));
+        assert!(matches!(
+            check(
+                Scan {
+                    range_min: -1.0,
+                    ..good
+                },
+                "negative range_min"
+            ),
+            PerceptionError::InvalidRangeLimits { .. }
+        ));
+        // 800 ranges at 0.5 degrees: 399.5 degrees, more beams than the increment allows.
+        let long = vec![5.0f32; 800];
+        assert!(matches!(
+            check(
+                Scan {
+                    ranges: &long,
+                    ..good
+                },
+                "ranges vs increment"
+            ),
+            PerceptionError::BeamCountMismatch { beams: 800, .. }
+        ));
+        // A full revolution is fine: 720 beams of 0.5 degrees.
+        let full = vec![5.0f32; 720];
+        assert!(
+            detect(
+                &Scan {
+                    ranges: &full,
+                    ..good
+                },
+                &mount,
+                &pose,
+                &cfg
+            )
+            .is_ok()
+        );
     }
 
     #[test]

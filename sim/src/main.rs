@@ -28,7 +28,7 @@ use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::cli::number;
 use firmware_bridge::clock::WallClock;
 use firmware_bridge::realtime;
-use ugv_controller::config::FollowerKind;
+use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::trace::TraceWriter;
 use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
@@ -39,6 +39,7 @@ use ugv_sim::record::live::{self, LiveView};
 use ugv_sim::run::Snapshot;
 use ugv_sim::scenario::Overrides;
 use ugv_sim::sil::Hook;
+use ugv_sim::sweep::{Plan, PlanInfo, Shard};
 use ugv_sim::verdict::{RunEnd, judge_and_write};
 use ugv_sim::{Mode, Outcome, Scenario};
 
@@ -576,7 +577,30 @@ fn exit_code(outcome: &Outcome, passed: bool) -> u8 {
     }
 }
 
+/// `ugv-sim run`: the scenario with the command line's changes, in SIL or in HIL.
 fn run_scenario(args: RunArgs) -> Result<ExitCode> {
+    let (sc, cfg) = scenario_to_run(&args)?;
+    anyhow::ensure!(
+        !(args.sil && args.isolate),
+        "--isolate is for HIL runs (SIL has no wires)"
+    );
+    anyhow::ensure!(
+        args.sil || args.pace.is_none(),
+        "--pace is for SIL runs (HIL runs in real time)"
+    );
+    // Started before anything else (in HIL before the endpoints, which may enter a
+    // private network namespace): the server's threads and socket are the host's.
+    let live = start_live(args.live)?;
+    if args.sil {
+        run_sil(&sc, &cfg, &args, live)
+    } else {
+        run_hil(&sc, &cfg, &args, live)
+    }
+}
+
+/// The scenario `ugv-sim run` runs, with the command line's changes checked in it, and
+/// the controller's configuration for it; the results folder is created.
+fn scenario_to_run(args: &RunArgs) -> Result<(Scenario, ControllerConfig)> {
     let sc = Scenario::load_or_paper(args.scenario.as_ref())?;
     let faults = match &args.faults {
         Some(file) => Some(ugv_sim::faults::plan::PlanFile::load(file)?),
@@ -604,87 +628,82 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     std::fs::create_dir_all(&args.results)
         .with_context(|| format!("creating {}", args.results.display()))?;
     eprintln!("ugv-sim: scenario {:?}: {}", sc.name, sc.description);
+    Ok((sc, cfg))
+}
 
-    anyhow::ensure!(
-        !(args.sil && args.isolate),
-        "--isolate is for HIL runs (SIL has no wires)"
-    );
-    anyhow::ensure!(
-        args.sil || args.pace.is_none(),
-        "--pace is for SIL runs (HIL runs in real time)"
-    );
-    // Started before anything else (in HIL before the endpoints, which may enter a
-    // private network namespace): the server's threads and socket are the host's.
-    let live = match args.live {
+/// The live view `--live` asks for, started and said how to connect to (none without
+/// `--live`).
+fn start_live(addr: Option<SocketAddr>) -> Result<Option<Arc<LiveView>>> {
+    Ok(match addr {
         Some(addr) => {
             let view = LiveView::start(addr)?;
             eprintln!("ugv-sim: {}", view.how_to_connect());
             Some(Arc::new(view))
         }
         None => None,
-    };
-    if args.sil {
-        let started = std::time::Instant::now();
-        let outputs = ugv_sim::record::Outputs {
-            dir: (!args.no_record).then_some(args.results.as_path()),
-            live: live.as_deref(),
-        };
-        // A viewer sees the run as it goes: real time unless --pace says otherwise.
-        let pace = args.pace.or(live.as_ref().map(|_| 1.0));
-        if live.is_some() && args.pace.is_none() {
-            eprintln!("ugv-sim: SIL paced at real time for the live view (--pace X to change)");
-        }
-        let paced = move |t: f64, _: &mut ugv_sim::sil::SilController| {
-            if let Some(due) = pace.map(|p| std::time::Duration::from_secs_f64(t / p)) {
-                std::thread::sleep(due.saturating_sub(started.elapsed()));
-            }
-            Hook::Continue
-        };
-        let run = ugv_sim::sil::run_sil_outputs(sc.clone(), &cfg, paced, outputs)?;
-        let wall = started.elapsed().as_secs_f64();
-        if let Some(s) = &run.recording {
-            eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
-        }
-        let end = RunEnd {
-            mode: Mode::Sil,
-            report: run.sim.report(run.outcome.clone()),
-            driven: &run.sim.trajectory,
-            trace: Some(&run.trace),
-        };
-        let verdict = judge_and_write(
-            &sc,
-            end,
-            cfg.perception.detection_radius,
-            &args.results,
-            |_| {},
-        )?;
-        eprintln!(
-            "ugv-sim: SIL {:.1} s simulated in {wall:.2} s ({:.0}x real time)",
-            verdict.time(),
-            verdict.time() / wall.max(1e-9)
-        );
-        println!("{}", serde_json::to_string_pretty(&verdict)?);
-        return Ok(ExitCode::from(exit_code(&run.outcome, verdict.passed)));
-    }
+    })
+}
 
-    let run_id = args
-        .run_id
-        .clone()
-        .unwrap_or_else(|| format!("{}-{}", sc.name, std::process::id()));
-    let options = HilOptions {
-        controller: args.controller.clone(),
-        controller_args: args.controller_args.clone(),
-        wait_for_controller: args.wait_for_controller,
-        gps_link: args.gps_link.clone(),
-        isolate: args.isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
-        run_id,
-        results: args.results.clone(),
-        status_every: args.status_every,
-        record: !args.no_record,
-        controller_log: args.controller_log,
-        live,
-        rt_priority: args.rt_priority,
+/// `ugv-sim run --sil`: the scenario in lockstep with the controller library, paced as
+/// asked; the verdict written and printed.
+fn run_sil(
+    sc: &Scenario,
+    cfg: &ControllerConfig,
+    args: &RunArgs,
+    live: Option<Arc<LiveView>>,
+) -> Result<ExitCode> {
+    let started = std::time::Instant::now();
+    let outputs = ugv_sim::record::Outputs {
+        dir: (!args.no_record).then_some(args.results.as_path()),
+        live: live.as_deref(),
     };
+    // A viewer sees the run as it goes: real time unless --pace says otherwise.
+    let pace = args.pace.or(live.as_ref().map(|_| 1.0));
+    if live.is_some() && args.pace.is_none() {
+        eprintln!("ugv-sim: SIL paced at real time for the live view (--pace X to change)");
+    }
+    let paced = move |t: f64, _: &mut ugv_sim::sil::SilController| {
+        if let Some(due) = pace.map(|p| std::time::Duration::from_secs_f64(t / p)) {
+            std::thread::sleep(due.saturating_sub(started.elapsed()));
+        }
+        Hook::Continue
+    };
+    let run = ugv_sim::sil::run_sil_outputs(sc.clone(), cfg, paced, outputs)?;
+    let wall = started.elapsed().as_secs_f64();
+    if let Some(s) = &run.recording {
+        eprintln!("ugv-sim: {}", ugv_sim::record::describe(s));
+    }
+    let end = RunEnd {
+        mode: Mode::Sil,
+        report: run.sim.report(run.outcome.clone()),
+        driven: &run.sim.trajectory,
+        trace: Some(&run.trace),
+    };
+    let verdict = judge_and_write(
+        sc,
+        end,
+        cfg.perception.detection_radius,
+        &args.results,
+        |_| {},
+    )?;
+    eprintln!(
+        "ugv-sim: SIL {:.1} s simulated in {wall:.2} s ({:.0}x real time)",
+        verdict.time(),
+        verdict.time() / wall.max(1e-9)
+    );
+    println!("{}", serde_json::to_string_pretty(&verdict)?);
+    Ok(ExitCode::from(exit_code(&run.outcome, verdict.passed)))
+}
+
+/// `ugv-sim run` in HIL: the scenario in real time on the wires, with status lines as
+/// it goes; the verdict printed.
+fn run_hil(
+    sc: &Scenario,
+    cfg: &ControllerConfig,
+    args: &RunArgs,
+    live: Option<Arc<LiveView>>,
+) -> Result<ExitCode> {
+    let options = hil_options(sc, args, live);
     let stop = stop_on_signal()?;
     let tty = std::io::stderr().is_terminal();
     let mut log = |line: &str| {
@@ -693,9 +712,9 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
         }
         eprintln!("ugv-sim: {line}");
     };
-    let endpoints = Endpoints::open(&sc, &options, &mut log)?;
+    let endpoints = Endpoints::open(sc, &options, &mut log)?;
     let (verdict, outcome) =
-        hil::run_scenario(&sc, &cfg, endpoints, &options, &stop, &mut log, &mut |s| {
+        hil::run_scenario(sc, cfg, endpoints, &options, &stop, &mut log, &mut |s| {
             if tty {
                 eprint!("\r\x1b[2K{}", status_line(s));
             } else {
@@ -709,79 +728,176 @@ fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     Ok(ExitCode::from(exit_code(&outcome, verdict.passed)))
 }
 
+/// The HIL options of `ugv-sim run`'s command line; the run id is the scenario's name
+/// and the process id unless `--run-id` gives one.
+fn hil_options(sc: &Scenario, args: &RunArgs, live: Option<Arc<LiveView>>) -> HilOptions {
+    let run_id = args
+        .run_id
+        .clone()
+        .unwrap_or_else(|| format!("{}-{}", sc.name, std::process::id()));
+    HilOptions {
+        controller: args.controller.clone(),
+        controller_args: args.controller_args.clone(),
+        wait_for_controller: args.wait_for_controller,
+        gps_link: args.gps_link.clone(),
+        isolate: args.isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
+        run_id,
+        results: args.results.clone(),
+        status_every: args.status_every,
+        record: !args.no_record,
+        controller_log: args.controller_log,
+        live,
+        rt_priority: args.rt_priority,
+    }
+}
+
+/// `ugv-sim suite`: this shard's items of the folder (or only their ids, with
+/// `--list`), run in SIL or HIL, and the summaries written.
 fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
     use ugv_sim::suite;
-    use ugv_sim::sweep::{Plan, Shard};
-    let SuiteArgs {
-        dir,
-        results,
-        jobs,
-        follower,
-        anfis_model,
-        hil,
-        controller,
-        cans,
-        isolate,
-        record,
-        seeds,
-        vary,
-        shard,
-        list,
-    } = args;
-    let files =
-        suite::scenario_files(&dir).with_context(|| format!("reading {}", dir.display()))?;
-    anyhow::ensure!(
-        !files.is_empty(),
-        "no scenario files (*.toml) in {}",
-        dir.display()
-    );
-    anyhow::ensure!(
-        hil || (controller.is_none() && cans.is_empty()),
-        "--controller and --can are for --hil runs"
-    );
-    anyhow::ensure!(
-        hil || !isolate,
-        "--isolate is for --hil runs (SIL has no wires)"
-    );
-    let shard = match shard {
-        Some(s) => s,
-        None => Shard::from_env(|k| std::env::var(k).ok())
-            .map_err(anyhow::Error::msg)?
-            .unwrap_or(Shard::ALL),
-    };
-    let plan = Plan::new(&files, seeds, &vary)?;
-    let info = plan.info(vec![
-        format!("mode={}", if hil { "hil" } else { "sil" }),
-        format!("follower={follower:?}"),
-        format!(
-            "anfis_model={}",
-            anfis_model
-                .as_ref()
-                .map_or_else(|| "-".to_owned(), |m| m.display().to_string())
-        ),
-    ]);
+    let files = suite_files(&args)?;
+    let shard = suite_shard(args.shard)?;
+    let plan = Plan::new(&files, args.seeds, &args.vary)?;
+    let info = plan.info(suite_settings(&args));
     let mine = plan.shard_items(shard);
-    if list {
+    if args.list {
         for &i in &mine {
             println!("{}", plan.items[i].id);
         }
         return Ok(ExitCode::SUCCESS);
     }
     let total = mine.len();
+    let (follower, anfis_model) = (args.follower, args.anfis_model.clone());
     let tune = move |sc: &Scenario| {
         let mut cfg = controller_config(sc, follower);
         cfg.follower.anfis_model = anfis_model.clone();
         cfg
     };
-    let sil = suite::sil_runner_recording(&tune, record.then_some(results.as_path()));
+    let sil = suite::sil_runner_recording(&tune, args.record.then_some(args.results.as_path()));
     let stop = stop_on_signal()?;
-    let controller = match controller {
-        Some(c) => c,
-        None => std::env::current_exe()?.with_file_name("ugv-controller"),
+    let hil_suite = HilSuite {
+        controller: match &args.controller {
+            Some(c) => c.clone(),
+            None => std::env::current_exe()?.with_file_name("ugv-controller"),
+        },
+        cans: &args.cans,
+        isolate: args.isolate,
+        record: args.record,
+        results: &args.results,
+        stop: &stop,
     };
-    let hil_runner = |id: &str, sc: &Scenario, slot: usize| {
+    let hil_runner = |id: &str, sc: &Scenario, slot: usize| hil_suite.run(id, sc, slot, &tune);
+    let (runner, jobs): (&suite::Runner<'_>, usize) = if args.hil {
+        anyhow::ensure!(
+            hil_suite.controller.is_file(),
+            "{} is not a file (--controller)",
+            hil_suite.controller.display()
+        );
+        // Isolated runs each have a bus of their own; otherwise one per interface.
+        let parallel = if args.isolate {
+            args.jobs.unwrap_or(1)
+        } else {
+            args.cans.len().max(1)
+        };
+        (&hil_runner, parallel)
+    } else {
+        (
+            &sil,
+            args.jobs
+                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        )
+    };
+    if shard != Shard::ALL || plan.items.len() > files.len() {
+        eprintln!(
+            "ugv-sim: {} items ({} scenarios x {} grid points x {} seeds); shard {shard}: {total}",
+            plan.items.len(),
+            files.len(),
+            plan.groups.len() / files.len(),
+            args.seeds,
+        );
+    }
+    let started = std::time::Instant::now();
+    let entries = run_with_progress(&plan, &mine, jobs, runner);
+    let wall = started.elapsed().as_secs_f64();
+    finish_suite(&args.results, info, shard, &entries, wall)
+}
+
+/// The scenario files of `ugv-sim suite`'s folder, after the checks of its command
+/// line: some files, and the HIL options only with `--hil`.
+fn suite_files(args: &SuiteArgs) -> Result<Vec<PathBuf>> {
+    let files = ugv_sim::suite::scenario_files(&args.dir)
+        .with_context(|| format!("reading {}", args.dir.display()))?;
+    anyhow::ensure!(
+        !files.is_empty(),
+        "no scenario files (*.toml) in {}",
+        args.dir.display()
+    );
+    anyhow::ensure!(
+        args.hil || (args.controller.is_none() && args.cans.is_empty()),
+        "--controller and --can are for --hil runs"
+    );
+    anyhow::ensure!(
+        args.hil || !args.isolate,
+        "--isolate is for --hil runs (SIL has no wires)"
+    );
+    Ok(files)
+}
+
+/// The shard to run: `--shard`, else the one a Kubernetes Indexed Job's environment
+/// names, else all.
+fn suite_shard(shard: Option<Shard>) -> Result<Shard> {
+    Ok(match shard {
+        Some(s) => s,
+        None => Shard::from_env(|k| std::env::var(k).ok())
+            .map_err(anyhow::Error::msg)?
+            .unwrap_or(Shard::ALL),
+    })
+}
+
+/// The suite's settings for its plan's record (items.json): the mode, the follower
+/// and the ANFIS model.
+fn suite_settings(args: &SuiteArgs) -> Vec<String> {
+    vec![
+        format!("mode={}", if args.hil { "hil" } else { "sil" }),
+        format!("follower={:?}", args.follower),
+        format!(
+            "anfis_model={}",
+            args.anfis_model
+                .as_ref()
+                .map_or_else(|| "-".to_owned(), |m| m.display().to_string())
+        ),
+    ]
+}
+
+/// What every HIL run of `ugv-sim suite --hil` shares.
+#[derive(Debug)]
+struct HilSuite<'a> {
+    /// The controller binary each run starts.
+    controller: PathBuf,
+    /// The CAN interface of each slot (`--can`); the scenario's own when none.
+    cans: &'a [String],
+    /// Each run in a private network namespace of its own (`--isolate`).
+    isolate: bool,
+    /// Record each run (`--record`).
+    record: bool,
+    /// The suite's results folder; each run's go in a folder of its own in it.
+    results: &'a std::path::Path,
+    /// Raised by Ctrl-C and SIGTERM.
+    stop: &'a AtomicBool,
+}
+
+impl HilSuite<'_> {
+    /// Item `id`'s scenario `sc` in HIL on slot `slot`'s interface, the controller
+    /// configured by `tune`: its verdict, or what went wrong in words.
+    fn run(
+        &self,
+        id: &str,
+        sc: &Scenario,
+        slot: usize,
+        tune: &dyn Fn(&Scenario) -> ControllerConfig,
+    ) -> Result<ugv_sim::verdict::Verdict, String> {
         let overrides = Overrides {
-            can: cans.get(slot).cloned(),
+            can: self.cans.get(slot).cloned(),
             ..Overrides::default()
         };
         let sc = sc
@@ -789,18 +905,18 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             .with_overrides(overrides)
             .map_err(|e| format!("with --can: {e}"))?;
         // The item's id as a name for folders, services and namespaces.
-        let slug = suite::item_dir_name(id);
+        let slug = ugv_sim::suite::item_dir_name(id);
         let run_id = format!("suite-{slug}-{}", std::process::id());
         let options = HilOptions {
-            controller: Some(controller.clone()),
+            controller: Some(self.controller.clone()),
             controller_args: Vec::new(),
             wait_for_controller: false,
             gps_link: None,
-            isolate: isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
+            isolate: self.isolate.then(|| ugv_sim::isolate::netns_name(&run_id)),
             run_id,
-            results: results.join(&slug),
+            results: self.results.join(&slug),
             status_every: 1.0,
-            record,
+            record: self.record,
             controller_log: false,
             live: None,
             rt_priority: realtime::DEFAULT_PRIORITY,
@@ -812,41 +928,24 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
             &tune(&sc),
             endpoints,
             &options,
-            &stop,
+            self.stop,
             &mut |_| {},
             &mut |_| {},
         )
         .map(|(verdict, _)| verdict)
         .map_err(|e| e.to_string())
-    };
-    let (runner, jobs): (&suite::Runner<'_>, usize) = if hil {
-        anyhow::ensure!(
-            controller.is_file(),
-            "{} is not a file (--controller)",
-            controller.display()
-        );
-        // Isolated runs each have a bus of their own; otherwise one per interface.
-        let parallel = if isolate {
-            jobs.unwrap_or(1)
-        } else {
-            cans.len().max(1)
-        };
-        (&hil_runner, parallel)
-    } else {
-        (
-            &sil,
-            jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
-        )
-    };
-    if shard != Shard::ALL || plan.items.len() > files.len() {
-        eprintln!(
-            "ugv-sim: {} items ({} scenarios x {} grid points x {seeds} seeds); shard {shard}: {total}",
-            plan.items.len(),
-            files.len(),
-            plan.groups.len() / files.len(),
-        );
     }
-    let started = std::time::Instant::now();
+}
+
+/// The items `mine` of `plan`, run `jobs` at a time by `runner`: a line on stderr as
+/// each ends, and on a terminal a progress bar with the ETA.
+fn run_with_progress(
+    plan: &Plan,
+    mine: &[usize],
+    jobs: usize,
+    runner: &ugv_sim::suite::Runner<'_>,
+) -> Vec<ugv_sim::suite::SuiteEntry> {
+    let total = mine.len();
     let bar = indicatif::ProgressBar::with_draw_target(
         Some(total as u64),
         indicatif::ProgressDrawTarget::stderr(),
@@ -855,7 +954,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} ETA {eta}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let entries = suite::run_items(&plan, &mine, jobs, runner, &|done, e| {
+    let entries = ugv_sim::suite::run_items(plan, mine, jobs, runner, &|done, e| {
         let width = 30;
         let filled = done * width / total.max(1);
         // The line per item stays (CI logs); the bar, on a terminal only, gives the ETA.
@@ -871,14 +970,26 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         bar.inc(1);
     });
     bar.finish_and_clear();
-    let wall = started.elapsed().as_secs_f64();
+    entries
+}
+
+/// The suite's summaries written into `results` and its pace said (`wall` seconds for
+/// the `entries`): exit code 0 when every item passed, 1 otherwise.
+fn finish_suite(
+    results: &std::path::Path,
+    info: PlanInfo,
+    shard: Shard,
+    entries: &[ugv_sim::suite::SuiteEntry],
+    wall: f64,
+) -> Result<ExitCode> {
+    use ugv_sim::suite;
     let simulated: f64 = entries
         .iter()
         .filter_map(|e| e.verdict.as_ref().map(|v| v.time()))
         .sum();
-    let shard_file = suite::ShardFile::of(info, shard, &entries);
+    let shard_file = suite::ShardFile::of(info, shard, entries);
     let summary = suite::Summary::of(shard_file.items.iter().map(|i| i.record.clone()).collect());
-    write_summaries(&results, &summary, &shard_file)?;
+    write_summaries(results, &summary, &shard_file)?;
     eprintln!(
         "ugv-sim: {simulated:.1} s simulated in {wall:.2} s ({:.0}x real time, {:.1} items/s); summaries in {}",
         simulated / wall.max(1e-9),

@@ -205,6 +205,55 @@ fn the_indexed_job_validates_and_its_indices_run_every_item_once() -> Result<()>
     Ok(())
 }
 
+/// The steps of the workflow's job `job`.
+fn steps(jobs: &Value, job: &str) -> Result<Vec<Value>> {
+    Ok(jobs[job]["steps"].as_array().context("steps")?.clone())
+}
+
+/// The command of the first step of job `job` that runs `what`.
+fn run_line(jobs: &Value, job: &str, what: &str) -> Result<String> {
+    steps(jobs, job)?
+        .iter()
+        .filter_map(|s| s["run"].as_str())
+        .find(|r| r.contains(what))
+        .map(str::to_owned)
+        .with_context(|| format!("a {job} step runs {what}"))
+}
+
+/// The merge job needs the shards, runs when they failed scenarios, downloads every
+/// shard's artifact (uploaded as `uploads`) into a folder of its own and merges them all.
+fn the_merge_reads_every_shard(jobs: &Value, uploads: &[String]) -> Result<()> {
+    let merge = &jobs["merge"];
+    assert_eq!(merge["needs"], "suite");
+    assert!(
+        merge["if"]
+            .as_str()
+            .is_some_and(|c| c.contains("!cancelled()")),
+        "{}",
+        merge["if"]
+    );
+    let download = steps(jobs, "merge")?
+        .into_iter()
+        .find(|s| s["with"]["pattern"].is_string())
+        .context("the merge downloads the shards by pattern")?;
+    let pattern = download["with"]["pattern"].as_str().context("pattern")?;
+    let prefix = pattern.strip_suffix('*').context("a prefix pattern")?;
+    assert!(
+        uploads.iter().all(|u| u.starts_with(prefix)),
+        "{uploads:?} {pattern}"
+    );
+    assert!(
+        !download["with"]["merge-multiple"]
+            .as_bool()
+            .unwrap_or(false),
+        "each shard in a folder of its own"
+    );
+    let dir = download["with"]["path"].as_str().context("path")?;
+    let line = run_line(jobs, "merge", "ugv-sim merge")?;
+    assert!(line.contains(&format!("merge {dir}/* --out")), "{line}");
+    Ok(())
+}
+
 #[test]
 fn the_workflow_matrix_runs_every_item_once_and_the_merge_reads_every_shard() -> Result<()> {
     let wf = check("workflow", &repo().join(".github/workflows/suite.yml"))?;
@@ -215,24 +264,13 @@ fn the_workflow_matrix_runs_every_item_once_and_the_merge_reads_every_shard() ->
         .iter()
         .filter_map(Value::as_u64)
         .collect();
-    let steps = |job: &str| -> Result<Vec<Value>> {
-        Ok(jobs[job]["steps"].as_array().context("steps")?.clone())
-    };
-    let run_line = |job: &str, what: &str| -> Result<String> {
-        steps(job)?
-            .iter()
-            .filter_map(|s| s["run"].as_str())
-            .find(|r| r.contains(what))
-            .map(str::to_owned)
-            .with_context(|| format!("a {job} step runs {what}"))
-    };
     // The build uses the workspace's toolchain.
-    let toolchain = steps("build")?
+    let toolchain = steps(jobs, "build")?
         .iter()
         .find_map(|s| s["with"]["toolchain"].as_str().map(str::to_owned))
         .context("the build job names its toolchain")?;
     assert_eq!(toolchain, rust_version()?);
-    let suite = run_line("suite", "ugv-sim suite")?;
+    let suite = run_line(jobs, "suite", "ugv-sim suite")?;
     // The matrix value as one word (the expression has spaces).
     const SHARD: &str = "${{ matrix.shard }}";
     let words: Vec<String> = suite
@@ -276,7 +314,7 @@ fn the_workflow_matrix_runs_every_item_once_and_the_merge_reads_every_shard() ->
             &args.iter().map(|a| sub(a)).collect::<Vec<_>>(),
             &[],
         )?);
-        let upload = steps("suite")?
+        let upload = steps(jobs, "suite")?
             .into_iter()
             .find(|s| {
                 s["uses"]
@@ -294,37 +332,7 @@ fn the_workflow_matrix_runs_every_item_once_and_the_merge_reads_every_shard() ->
     }
     exactly_once(&all, &shards)?;
 
-    // The merge needs the shards, runs when they failed scenarios, downloads every
-    // shard's artifact into a folder of its own and merges them all.
-    let merge = &jobs["merge"];
-    assert_eq!(merge["needs"], "suite");
-    assert!(
-        merge["if"]
-            .as_str()
-            .is_some_and(|c| c.contains("!cancelled()")),
-        "{}",
-        merge["if"]
-    );
-    let download = steps("merge")?
-        .into_iter()
-        .find(|s| s["with"]["pattern"].is_string())
-        .context("the merge downloads the shards by pattern")?;
-    let pattern = download["with"]["pattern"].as_str().context("pattern")?;
-    let prefix = pattern.strip_suffix('*').context("a prefix pattern")?;
-    assert!(
-        uploads.iter().all(|u| u.starts_with(prefix)),
-        "{uploads:?} {pattern}"
-    );
-    assert!(
-        !download["with"]["merge-multiple"]
-            .as_bool()
-            .unwrap_or(false),
-        "each shard in a folder of its own"
-    );
-    let dir = download["with"]["path"].as_str().context("path")?;
-    let line = run_line("merge", "ugv-sim merge")?;
-    assert!(line.contains(&format!("merge {dir}/* --out")), "{line}");
-    Ok(())
+    the_merge_reads_every_shard(jobs, &uploads)
 }
 
 #[test]

@@ -100,6 +100,100 @@ fn horizontal_m(a: &Geodetic, lat: f64, lon: f64) -> f64 {
     dn.hypot(de)
 }
 
+/// What gpsd reported. It reports a cycle's fix as it assembles it: a TPV after GGA (no
+/// speed or track yet), then another once RMC/VTG are in. The last TPV of an epoch is its
+/// report; an epoch is complete once a TPV of a later epoch has arrived.
+#[derive(Default)]
+struct Reported {
+    /// The 3D TPVs by time, each with the epoch sent at that time.
+    tpvs: BTreeMap<DateTime<Utc>, (Value, GpsEpoch)>,
+    gst: Option<Value>,
+    /// The heading of the ATT reports.
+    att_heading: Option<f64>,
+    /// TPVs without a time.
+    untimed: usize,
+}
+
+impl Reported {
+    /// Epochs whose report is complete.
+    fn completed(&self) -> usize {
+        self.tpvs.len().saturating_sub(1)
+    }
+
+    /// Take a line of gpsd's JSON, its TPVs matched with the epochs `sent`.
+    fn take(&mut self, line: &str, sent: &BTreeMap<DateTime<Utc>, GpsEpoch>) -> Result<()> {
+        if line.starts_with("{\"class\":\"ATT\"") {
+            // gpsd 3.22 writes malformed ATT JSON from HDT (`,,` and a
+            // missing comma); take its heading from the text.
+            self.att_heading = Some(json_number(line, "heading").context(line.to_owned())?);
+            return Ok(());
+        }
+        let v: Value =
+            serde_json::from_str(line.trim()).with_context(|| format!("gpsd JSON {line:?}"))?;
+        match v["class"].as_str() {
+            Some("TPV") if v["mode"].as_i64() == Some(3) => {
+                let Some(time) = v["time"].as_str() else {
+                    // gpsd reports a cycle before it has the date (ZDA, RMC).
+                    self.untimed += 1;
+                    ensure!(self.untimed < 5, "TPVs without time: {v}");
+                    return Ok(());
+                };
+                let time = DateTime::parse_from_rfc3339(time)?.to_utc();
+                let epoch = sent
+                    .iter()
+                    .find(|(t, _)| (**t - time).num_milliseconds().abs() < 5)
+                    .map(|(_, e)| e.clone())
+                    .with_context(|| format!("TPV at {time} matches no epoch sent"))?;
+                self.tpvs.insert(time, (v, epoch));
+            }
+            Some("GST") => self.gst = Some(v),
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// gpsd's TPV `v` agrees with the epoch `e` sent: position, height, RTK status, speed
+/// and track.
+fn check_tpv(v: &Value, e: &GpsEpoch) -> Result<()> {
+    let what = format!("TPV {v}");
+    let lat = v["lat"].as_f64().context("lat")?;
+    let lon = v["lon"].as_f64().context("lon")?;
+    // gpsd's position is the one sent (9 decimals of a degree: 0.1 mm)...
+    let d_sent = horizontal_m(
+        &Geodetic {
+            lat_deg: e.fix.lat_deg,
+            lon_deg: e.fix.lon_deg,
+            height_m: 0.0,
+        },
+        lat,
+        lon,
+    );
+    ensure!(d_sent < 0.002, "{what}: {d_sent} m from the fix sent");
+    // ...which is the simulated antenna within RTK noise (5 sigma of 1.5 cm per axis).
+    let d_true = horizontal_m(&e.truth.geodetic, lat, lon);
+    ensure!(
+        d_true < 0.075 * std::f64::consts::SQRT_2,
+        "{what}: {d_true} m from the antenna"
+    );
+    // Heights: HAE (MSL + geoid separation) within 5 sigma of 3 cm.
+    let hae = v["altHAE"].as_f64().context("altHAE")?;
+    ensure!(
+        (hae - e.truth.geodetic.height_m).abs() < 0.15,
+        "{what}: altHAE {hae}"
+    );
+    // gpsd's status 2 is DGPS, 3 RTK fixed, 4 RTK float.
+    ensure!(
+        v["status"].as_i64() == Some(3),
+        "{what}: status is not RTK fixed"
+    );
+    let speed = v["speed"].as_f64().context("speed")?;
+    ensure!((speed - 2.0).abs() < 0.1, "{what}: speed {speed}");
+    let track = v["track"].as_f64().context("track")?;
+    ensure!(angle_diff(track, 60.0).abs() < 3.0, "{what}: track {track}");
+    Ok(())
+}
+
 #[test]
 fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
     let dir = tempfile::tempdir()?;
@@ -125,24 +219,16 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
     let start = Instant::now();
     let mut client: Option<BufReader<TcpStream>> = None;
     let mut sent: BTreeMap<DateTime<Utc>, GpsEpoch> = BTreeMap::new();
-    // gpsd reports a cycle's fix as it assembles it: a TPV after GGA (no speed or
-    // track yet), then another once RMC/VTG are in. The last TPV of an epoch is its
-    // report; an epoch is complete once a TPV of a later epoch has arrived.
-    let mut tpvs: BTreeMap<DateTime<Utc>, (Value, GpsEpoch)> = BTreeMap::new();
-    let completed =
-        |tpvs: &BTreeMap<DateTime<Utc>, (Value, GpsEpoch)>| tpvs.len().saturating_sub(1);
-    let mut gst: Option<Value> = None;
-    let mut att_heading: Option<f64> = None;
+    let mut got = Reported::default();
     let mut line = String::new();
-    let mut untimed = 0;
-    while completed(&tpvs) < 10 || gst.is_none() || att_heading.is_none() {
+    while got.completed() < 10 || got.gst.is_none() || got.att_heading.is_none() {
         let elapsed = start.elapsed().as_secs_f64();
         if elapsed > 30.0 {
             bail!(
                 "after 30 s gpsd gave {} complete matching 3D epochs (GST: {}, ATT: {}); its log:\n{}",
-                completed(&tpvs),
-                gst.is_some(),
-                att_heading.is_some(),
+                got.completed(),
+                got.gst.is_some(),
+                got.att_heading.is_some(),
                 gpsd.log()
             );
         }
@@ -163,35 +249,8 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
         match c.read_line(&mut line) {
             Ok(0) => bail!("gpsd closed the connection; its log:\n{}", gpsd.log()),
             Ok(_) if line.ends_with('\n') => {
-                if line.starts_with("{\"class\":\"ATT\"") {
-                    // gpsd 3.22 writes malformed ATT JSON from HDT (`,,` and a
-                    // missing comma); take its heading from the text.
-                    att_heading = Some(json_number(&line, "heading").context(line.clone())?);
-                    line.clear();
-                    continue;
-                }
-                let v: Value = serde_json::from_str(line.trim())
-                    .with_context(|| format!("gpsd JSON {line:?}"))?;
+                got.take(&line, &sent)?;
                 line.clear();
-                match v["class"].as_str() {
-                    Some("TPV") if v["mode"].as_i64() == Some(3) => {
-                        let Some(time) = v["time"].as_str() else {
-                            // gpsd reports a cycle before it has the date (ZDA, RMC).
-                            untimed += 1;
-                            ensure!(untimed < 5, "TPVs without time: {v}");
-                            continue;
-                        };
-                        let time = DateTime::parse_from_rfc3339(time)?.to_utc();
-                        let epoch = sent
-                            .iter()
-                            .find(|(t, _)| (**t - time).num_milliseconds().abs() < 5)
-                            .map(|(_, e)| e.clone())
-                            .with_context(|| format!("TPV at {time} matches no epoch sent"))?;
-                        tpvs.insert(time, (v, epoch));
-                    }
-                    Some("GST") => gst = Some(v),
-                    _ => {}
-                }
             }
             Ok(_) => {}
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
@@ -199,6 +258,12 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
         }
     }
 
+    let Reported {
+        mut tpvs,
+        gst,
+        att_heading,
+        ..
+    } = got;
     // The latest epoch may still be incomplete.
     tpvs.pop_last();
     eprintln!(
@@ -210,41 +275,7 @@ fn gpsd_reports_a_3d_rtk_fix_at_the_simulated_position() -> Result<()> {
     eprintln!("gpsd log tail:\n{}", gpsd.log());
     ensure!(tpvs.len() >= 10, "{} complete epochs", tpvs.len());
     for (v, e) in tpvs.values() {
-        let what = format!("TPV {v}");
-        let lat = v["lat"].as_f64().context("lat")?;
-        let lon = v["lon"].as_f64().context("lon")?;
-        // gpsd's position is the one sent (9 decimals of a degree: 0.1 mm)...
-        let d_sent = horizontal_m(
-            &Geodetic {
-                lat_deg: e.fix.lat_deg,
-                lon_deg: e.fix.lon_deg,
-                height_m: 0.0,
-            },
-            lat,
-            lon,
-        );
-        ensure!(d_sent < 0.002, "{what}: {d_sent} m from the fix sent");
-        // ...which is the simulated antenna within RTK noise (5 sigma of 1.5 cm per axis).
-        let d_true = horizontal_m(&e.truth.geodetic, lat, lon);
-        ensure!(
-            d_true < 0.075 * std::f64::consts::SQRT_2,
-            "{what}: {d_true} m from the antenna"
-        );
-        // Heights: HAE (MSL + geoid separation) within 5 sigma of 3 cm.
-        let hae = v["altHAE"].as_f64().context("altHAE")?;
-        ensure!(
-            (hae - e.truth.geodetic.height_m).abs() < 0.15,
-            "{what}: altHAE {hae}"
-        );
-        // gpsd's status 2 is DGPS, 3 RTK fixed, 4 RTK float.
-        ensure!(
-            v["status"].as_i64() == Some(3),
-            "{what}: status is not RTK fixed"
-        );
-        let speed = v["speed"].as_f64().context("speed")?;
-        ensure!((speed - 2.0).abs() < 0.1, "{what}: speed {speed}");
-        let track = v["track"].as_f64().context("track")?;
-        ensure!(angle_diff(track, 60.0).abs() < 3.0, "{what}: track {track}");
+        check_tpv(v, e)?;
     }
     let gst = gst.context("GST")?;
     for (key, want) in [("lat", 0.015), ("lon", 0.015), ("alt", 0.03)] {

@@ -145,103 +145,10 @@ fn check_epoch(e: &GpsEpoch, recs: &[Value], talker: &str) -> Result<()> {
             || (close(r["latitude"].as_f64(), f.lat_deg, 1e-8)
                 && close(r["longitude"].as_f64(), f.lon_deg, 1e-8));
         match ty {
-            "GGA" => {
-                ensure!(
-                    num(field(r, "gps_qual")) == Some(f64::from(f.quality.gga_digit())),
-                    "{what}"
-                );
-                ensure!(
-                    num(field(r, "num_sats")) == Some(f64::from(f.satellites)),
-                    "{what}"
-                );
-                ensure!(
-                    close(num(field(r, "horizontal_dil")), f.hdop, 0.006),
-                    "{what}"
-                );
-                if valid {
-                    ensure!(lat_ok, "{what}: position");
-                    ensure!(
-                        close(num(field(r, "altitude")), f.altitude_msl_m(), 6e-4),
-                        "{what}"
-                    );
-                    ensure!(
-                        close(num(field(r, "geo_sep")), f.geoid_separation_m, 6e-4),
-                        "{what}"
-                    );
-                    match f.correction_age_s {
-                        Some(age) => {
-                            ensure!(close(num(field(r, "age_gps_data")), age, 0.06), "{what}")
-                        }
-                        None => ensure!(field(r, "age_gps_data") == "", "{what}: age"),
-                    }
-                    let station = f.station_id.map(|s| format!("{s:04}")).unwrap_or_default();
-                    ensure!(
-                        field(r, "ref_station_id") == station.as_str(),
-                        "{what}: station"
-                    );
-                } else {
-                    ensure!(
-                        field(r, "lat") == "" && field(r, "altitude").is_null(),
-                        "{what}"
-                    );
-                }
-            }
-            "RMC" => {
-                ensure!(
-                    field(r, "status") == if valid { "A" } else { "V" },
-                    "{what}: status"
-                );
-                ensure!(
-                    field(r, "datestamp").as_str() == Some(&e.utc.format("%Y-%m-%d").to_string()),
-                    "{what}: date"
-                );
-                let mode = f.quality.mode().as_char().to_string();
-                ensure!(field(r, "mode_indicator") == mode.as_str(), "{what}: mode");
-                if valid {
-                    ensure!(lat_ok, "{what}: position");
-                    let knots = f.speed_mps * KNOTS_PER_MPS;
-                    ensure!(
-                        close(num(field(r, "spd_over_grnd")), knots, 6e-4),
-                        "{what}: speed"
-                    );
-                    ensure!(
-                        angle_close(num(field(r, "true_course")), f.course_deg, 0.006),
-                        "{what}"
-                    );
-                }
-            }
-            "VTG" => {
-                let mode = f.quality.mode().as_char().to_string();
-                ensure!(field(r, "faa_mode") == mode.as_str(), "{what}: mode");
-                if valid {
-                    ensure!(
-                        angle_close(num(field(r, "true_track")), f.course_deg, 0.006),
-                        "{what}"
-                    );
-                    ensure!(
-                        close(num(field(r, "spd_over_grnd_kmph")), f.speed_mps * 3.6, 6e-4),
-                        "{what}: speed"
-                    );
-                }
-            }
-            "GST" => match (valid, f.accuracy) {
-                (true, Some(a)) => {
-                    for (name, want) in [
-                        ("rms", a.rms_m),
-                        ("std_dev_major", a.semi_major_m),
-                        ("std_dev_minor", a.semi_minor_m),
-                        ("std_dev_latitude", a.lat_sigma_m),
-                        ("std_dev_longitude", a.lon_sigma_m),
-                        ("std_dev_altitude", a.alt_sigma_m),
-                    ] {
-                        ensure!(close(num(field(r, name)), want, 6e-4), "{what}: {name}");
-                    }
-                }
-                _ => ensure!(
-                    num(field(r, "std_dev_latitude")).is_none(),
-                    "{what}: GST without fix"
-                ),
-            },
+            "GGA" => check_gga(e, r, lat_ok, &what)?,
+            "RMC" => check_rmc(e, r, lat_ok, &what)?,
+            "VTG" => check_vtg(e, r, &what)?,
+            "GST" => check_gst(e, r, &what)?,
             "HDT" | "THS" => match f.heading_deg {
                 Some(h) => ensure!(angle_close(num(field(r, "heading")), h, 6e-4), "{what}"),
                 None => ensure!(
@@ -249,20 +156,142 @@ fn check_epoch(e: &GpsEpoch, recs: &[Value], talker: &str) -> Result<()> {
                     "{what}: heading without fix"
                 ),
             },
-            "ZDA" => {
-                let date = e.utc.format("%d %m %Y").to_string();
-                let got = ["day", "month", "year"]
-                    .map(|k| num(field(r, k)).map_or(-1, |v| v as i64))
-                    .map(|v| v.to_string());
-                let want: Vec<String> = date
-                    .split(' ')
-                    .map(|s| s.parse::<i64>().map_or(-2, |v| v).to_string())
-                    .collect();
-                ensure!(got.as_slice() == want.as_slice(), "{what}: date {got:?}");
-            }
+            "ZDA" => check_zda(e, r, &what)?,
             other => bail!("{what}: unexpected sentence {other}"),
         }
     }
+    Ok(())
+}
+
+/// pynmea2's GGA `r` (`what`, in messages) agrees with `e`'s fix: quality, satellites,
+/// HDOP, and with a fix the position (`lat_ok`), heights, correction age and station.
+fn check_gga(e: &GpsEpoch, r: &Value, lat_ok: bool, what: &str) -> Result<()> {
+    let f = &e.fix;
+    ensure!(
+        num(field(r, "gps_qual")) == Some(f64::from(f.quality.gga_digit())),
+        "{what}"
+    );
+    ensure!(
+        num(field(r, "num_sats")) == Some(f64::from(f.satellites)),
+        "{what}"
+    );
+    ensure!(
+        close(num(field(r, "horizontal_dil")), f.hdop, 0.006),
+        "{what}"
+    );
+    if f.quality.has_position() {
+        ensure!(lat_ok, "{what}: position");
+        ensure!(
+            close(num(field(r, "altitude")), f.altitude_msl_m(), 6e-4),
+            "{what}"
+        );
+        ensure!(
+            close(num(field(r, "geo_sep")), f.geoid_separation_m, 6e-4),
+            "{what}"
+        );
+        match f.correction_age_s {
+            Some(age) => {
+                ensure!(close(num(field(r, "age_gps_data")), age, 0.06), "{what}")
+            }
+            None => ensure!(field(r, "age_gps_data") == "", "{what}: age"),
+        }
+        let station = f.station_id.map(|s| format!("{s:04}")).unwrap_or_default();
+        ensure!(
+            field(r, "ref_station_id") == station.as_str(),
+            "{what}: station"
+        );
+    } else {
+        ensure!(
+            field(r, "lat") == "" && field(r, "altitude").is_null(),
+            "{what}"
+        );
+    }
+    Ok(())
+}
+
+/// pynmea2's RMC `r` agrees with `e`: status, date and mode, and with a fix the
+/// position (`lat_ok`), speed and course.
+fn check_rmc(e: &GpsEpoch, r: &Value, lat_ok: bool, what: &str) -> Result<()> {
+    let f = &e.fix;
+    let valid = f.quality.has_position();
+    ensure!(
+        field(r, "status") == if valid { "A" } else { "V" },
+        "{what}: status"
+    );
+    ensure!(
+        field(r, "datestamp").as_str() == Some(&e.utc.format("%Y-%m-%d").to_string()),
+        "{what}: date"
+    );
+    let mode = f.quality.mode().as_char().to_string();
+    ensure!(field(r, "mode_indicator") == mode.as_str(), "{what}: mode");
+    if valid {
+        ensure!(lat_ok, "{what}: position");
+        let knots = f.speed_mps * KNOTS_PER_MPS;
+        ensure!(
+            close(num(field(r, "spd_over_grnd")), knots, 6e-4),
+            "{what}: speed"
+        );
+        ensure!(
+            angle_close(num(field(r, "true_course")), f.course_deg, 0.006),
+            "{what}"
+        );
+    }
+    Ok(())
+}
+
+/// pynmea2's VTG `r` agrees with `e`'s fix: the mode, and with a fix track and speed.
+fn check_vtg(e: &GpsEpoch, r: &Value, what: &str) -> Result<()> {
+    let f = &e.fix;
+    let mode = f.quality.mode().as_char().to_string();
+    ensure!(field(r, "faa_mode") == mode.as_str(), "{what}: mode");
+    if f.quality.has_position() {
+        ensure!(
+            angle_close(num(field(r, "true_track")), f.course_deg, 0.006),
+            "{what}"
+        );
+        ensure!(
+            close(num(field(r, "spd_over_grnd_kmph")), f.speed_mps * 3.6, 6e-4),
+            "{what}: speed"
+        );
+    }
+    Ok(())
+}
+
+/// pynmea2's GST `r` agrees with `e`'s fix: its sigmas with a fix, none without.
+fn check_gst(e: &GpsEpoch, r: &Value, what: &str) -> Result<()> {
+    let f = &e.fix;
+    match (f.quality.has_position(), f.accuracy) {
+        (true, Some(a)) => {
+            for (name, want) in [
+                ("rms", a.rms_m),
+                ("std_dev_major", a.semi_major_m),
+                ("std_dev_minor", a.semi_minor_m),
+                ("std_dev_latitude", a.lat_sigma_m),
+                ("std_dev_longitude", a.lon_sigma_m),
+                ("std_dev_altitude", a.alt_sigma_m),
+            ] {
+                ensure!(close(num(field(r, name)), want, 6e-4), "{what}: {name}");
+            }
+        }
+        _ => ensure!(
+            num(field(r, "std_dev_latitude")).is_none(),
+            "{what}: GST without fix"
+        ),
+    }
+    Ok(())
+}
+
+/// pynmea2's ZDA `r` carries `e`'s date.
+fn check_zda(e: &GpsEpoch, r: &Value, what: &str) -> Result<()> {
+    let date = e.utc.format("%d %m %Y").to_string();
+    let got = ["day", "month", "year"]
+        .map(|k| num(field(r, k)).map_or(-1, |v| v as i64))
+        .map(|v| v.to_string());
+    let want: Vec<String> = date
+        .split(' ')
+        .map(|s| s.parse::<i64>().map_or(-2, |v| v).to_string())
+        .collect();
+    ensure!(got.as_slice() == want.as_slice(), "{what}: date {got:?}");
     Ok(())
 }
 

@@ -73,22 +73,7 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
     );
     let clearance = verdict["min_clearance"][0].as_f64().context("clearance")?;
     ensure!(clearance > 0.5, "min clearance {clearance}");
-    // Every frame on the bus passed the E2E checks, both ways.
-    for node in ["steering_can", "throttle_can"] {
-        let e2e = &verdict[node]["e2e"];
-        let accepted = e2e["accepted"].as_u64().context("accepted")?;
-        ensure!(accepted > 1000, "{node}: only {accepted} frames");
-        for key in [
-            "bad_crc",
-            "repeated_counter",
-            "skipped_counter",
-            "wrong_dlc",
-            "unknown_id",
-            "second_sender",
-        ] {
-            ensure!(e2e[key] == 0, "{node}: {key} = {}", e2e[key]);
-        }
-    }
+    every_frame_passed_the_e2e_checks(&verdict)?;
     // The controller's own account: it drove in auto, tracked its plans, and replanned.
     let controller = &verdict["controller"];
     ensure!(
@@ -110,19 +95,58 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
     let p50 = latency["fix_to_command"]["p50_ms"].as_f64().unwrap_or(-1.0);
     let read = latency["fix_to_read"]["p50_ms"].as_f64().unwrap_or(-1.0);
     ensure!(p50 > 0.0 && read > 0.0 && p50 >= read, "{latency}");
-    // The verdict's bus load against canbusload's (both worst-case bit stuffing): the
-    // same bits per frame, and the frames canbusload counted in the seconds it saw
-    // traffic are those of the run (it also sees the frames before and after, and its
-    // seconds do not start with the run's).
+    the_bus_load_agrees_with_canbusload(&verdict, &load_log, &vcan.name)?;
+    for file in [
+        "verdict.json",
+        "trace.json",
+        "figure.svg",
+        "figure.png",
+        "controller.toml",
+        "wires.json",
+    ] {
+        ensure!(results.join(file).is_file(), "{file} missing");
+    }
+    Ok(())
+}
+
+/// Every frame on the bus passed the E2E checks, both ways, by the `verdict`'s counts.
+fn every_frame_passed_the_e2e_checks(verdict: &serde_json::Value) -> Result<()> {
+    for node in ["steering_can", "throttle_can"] {
+        let e2e = &verdict[node]["e2e"];
+        let accepted = e2e["accepted"].as_u64().context("accepted")?;
+        ensure!(accepted > 1000, "{node}: only {accepted} frames");
+        for key in [
+            "bad_crc",
+            "repeated_counter",
+            "skipped_counter",
+            "wrong_dlc",
+            "unknown_id",
+            "second_sender",
+        ] {
+            ensure!(e2e[key] == 0, "{node}: {key} = {}", e2e[key]);
+        }
+    }
+    Ok(())
+}
+
+/// The `verdict`'s bus load against canbusload's on `iface` (its log `load_log`; both
+/// worst-case bit stuffing): the same bits per frame, and the frames canbusload counted
+/// in the seconds it saw traffic are those of the run (it also sees the frames before
+/// and after, and its seconds do not start with the run's).
+fn the_bus_load_agrees_with_canbusload(
+    verdict: &serde_json::Value,
+    load_log: &std::path::Path,
+    iface: &str,
+) -> Result<()> {
     let load = &verdict["bus_load"];
     let frames = load["frames"].as_u64().context("bus_load.frames")?;
     let bits = load["bits"].as_u64().context("bus_load.bits")?;
     ensure!(bits == frames * 135, "{load}");
-    let log = std::fs::read_to_string(&load_log)?;
+    let log = std::fs::read_to_string(load_log)?;
     let (mut their_frames, mut their_bits) = (0u64, 0u64);
     for line in log
         .lines()
-        .filter(|l| l.contains(&format!("{}@500000", vcan.name)))
+        .filter(|l| l.contains(&format!("{iface}@500000")))
     {
         // " vcanX@500000   805   74491  36656  15%"
         let f: Vec<&str> = line.split_whitespace().collect();
@@ -144,15 +168,5 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
         (0.97..=1.1).contains(&ratio),
         "canbusload counted {their_frames} frames, the verdict {frames}:\n{log}"
     );
-    for file in [
-        "verdict.json",
-        "trace.json",
-        "figure.svg",
-        "figure.png",
-        "controller.toml",
-        "wires.json",
-    ] {
-        ensure!(results.join(file).is_file(), "{file} missing");
-    }
     Ok(())
 }

@@ -5,6 +5,7 @@
 //! Needs vcan (fails loudly without it); the README's test command runs it natively
 //! or inside `vcan-setup vm`.
 
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
@@ -80,78 +81,8 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
     let (log, last_cmd_rel) = controller_log(&vcan.name)?;
     let log_path = dir.path().join("controller.log");
     std::fs::write(&log_path, log)?;
-
-    // candump first, then the simulator; its reports on candump show both are up.
-    let mut candump = Kill(
-        Command::new("candump")
-            .args(["-L", &vcan.name])
-            .stdout(Stdio::piped())
-            .spawn()
-            .context("candump (can-utils)")?,
-    );
-    let stdout = candump.0.stdout.take().context("candump stdout")?;
-    let (lines_tx, lines) = std::sync::mpsc::channel::<String>();
-    std::thread::spawn(move || {
-        use std::io::BufRead;
-        for l in std::io::BufReader::new(stdout)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if lines_tx.send(l).is_err() {
-                break;
-            }
-        }
-    });
-    let sim = Kill(
-        Command::new(workspace_bin("ugv-sim")?)
-            .args([
-                "run",
-                "--can",
-                &vcan.name,
-                "--time-limit",
-                "120",
-                "--status-every",
-                "5",
-            ])
-            .arg("--results")
-            .arg(dir.path().join("results"))
-            .arg("--gps-link")
-            .arg(dir.path().join("gps"))
-            .stdout(Stdio::null())
-            .spawn()
-            .context("ugv-sim")?,
-    );
-    let mut captured = Vec::new();
-    let first = lines
-        .recv_timeout(Duration::from_secs(60))
-        .context("no frame from ugv-sim on the bus within 60 s")?;
-    captured.push(first);
-
-    let player = Command::new("canplayer")
-        .args(["-I", &log_path.to_string_lossy()])
-        .status()
-        .context("canplayer (can-utils)")?;
-    ensure!(player.success(), "canplayer failed: {player}");
-    // Let the watchdog trip and a few safe reports go out.
-    let until = std::time::Instant::now() + Duration::from_secs(3);
-    while let Ok(l) = lines.recv_timeout(until.saturating_duration_since(std::time::Instant::now()))
-    {
-        captured.push(l);
-    }
-    drop(sim);
-    drop(candump);
-
-    // Decode everything, E2E-checked per sender, with candump's kernel timestamps.
-    let mut rx = E2eRx::new(&NETWORK);
-    let mut frames = Vec::new();
-    for l in &captured {
-        let f = parse_line(l).with_context(|| format!("candump line {l:?}"))?;
-        let ts: f64 = f.timestamp.as_deref().unwrap_or("0").parse()?;
-        let (id, payload) = rx
-            .accept_parts(f.id, f.extended, f.remote, &f.data)
-            .with_context(|| format!("E2E of {l:?}"))?;
-        frames.push((ts, GolfCarMessage::decode(id, &payload)?));
-    }
+    let captured = capture(&vcan.name, dir.path(), &log_path)?;
+    let frames = decode(&captured)?;
     let last_cmd = frames
         .iter()
         .filter(|(_, m)| matches!(m, GolfCarMessage::SteeringCmd(_)))
@@ -180,27 +111,105 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
             _ => None,
         })
         .collect();
+    steering_ramps_at_its_rate_limit(&steering, last_cmd)?;
+    both_ecus_go_safe_after_the_commands_stop(&steering, &throttle, last_cmd)?;
+    let last_thr = throttle.last().context("no throttle reports")?.1;
+    ensure!(
+        last_thr.brake == 100.0 && last_thr.throttle == 0.0,
+        "{last_thr:?}"
+    );
+    Ok(())
+}
 
-    // The ECUs' reports are judged in the ECUs' own time. A simulator that stalls
-    // catches up afterwards, sending its late ticks' reports in a burst, so a report's
-    // receive time is only a bound: never before it was due. While an ECU stays in one
-    // state its reports are periodic (it also reports at once on entering or leaving
-    // its enabled state), so within such a run report i is due at t0 + i periods, t0
-    // the tightest bound the reports sent on time give. The ticks take in the commands
-    // by their kernel receive times, the ones candump shows: one clock for both.
-    let due_times = |received: &[f64], period: f64| -> Vec<f64> {
-        let t0 = received
-            .iter()
-            .enumerate()
-            .map(|(i, t)| t - i as f64 * period)
-            .fold(f64::INFINITY, f64::min);
-        (0..received.len())
-            .map(|i| t0 + i as f64 * period)
-            .collect()
-    };
+/// The bus on `iface` as candump shows it while the real `ugv-sim` runs its ECUs there
+/// (results in `dir`) and canplayer replays `log_path`, until a few safe reports have
+/// gone out after it.
+fn capture(iface: &str, dir: &Path, log_path: &Path) -> Result<Vec<String>> {
+    // candump first, then the simulator; its reports on candump show both are up.
+    let mut candump = Kill(
+        Command::new("candump")
+            .args(["-L", iface])
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("candump (can-utils)")?,
+    );
+    let stdout = candump.0.stdout.take().context("candump stdout")?;
+    let (lines_tx, lines) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for l in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if lines_tx.send(l).is_err() {
+                break;
+            }
+        }
+    });
+    let sim = Kill(
+        Command::new(workspace_bin("ugv-sim")?)
+            .args([
+                "run",
+                "--can",
+                iface,
+                "--time-limit",
+                "120",
+                "--status-every",
+                "5",
+            ])
+            .arg("--results")
+            .arg(dir.join("results"))
+            .arg("--gps-link")
+            .arg(dir.join("gps"))
+            .stdout(Stdio::null())
+            .spawn()
+            .context("ugv-sim")?,
+    );
+    let mut captured = Vec::new();
+    let first = lines
+        .recv_timeout(Duration::from_secs(60))
+        .context("no frame from ugv-sim on the bus within 60 s")?;
+    captured.push(first);
+
+    let player = Command::new("canplayer")
+        .args(["-I", &log_path.to_string_lossy()])
+        .status()
+        .context("canplayer (can-utils)")?;
+    ensure!(player.success(), "canplayer failed: {player}");
+    // Let the watchdog trip and a few safe reports go out.
+    let until = std::time::Instant::now() + Duration::from_secs(3);
+    while let Ok(l) = lines.recv_timeout(until.saturating_duration_since(std::time::Instant::now()))
+    {
+        captured.push(l);
+    }
+    drop(sim);
+    drop(candump);
+    Ok(captured)
+}
+
+/// Every candump line `captured`, E2E-checked per sender and decoded, with candump's
+/// kernel timestamp.
+fn decode(captured: &[String]) -> Result<Vec<(f64, GolfCarMessage)>> {
+    let mut rx = E2eRx::new(&NETWORK);
+    let mut frames = Vec::new();
+    for l in captured {
+        let f = parse_line(l).with_context(|| format!("candump line {l:?}"))?;
+        let ts: f64 = f.timestamp.as_deref().unwrap_or("0").parse()?;
+        let (id, payload) = rx
+            .accept_parts(f.id, f.extended, f.remote, &f.data)
+            .with_context(|| format!("E2E of {l:?}"))?;
+        frames.push((ts, GolfCarMessage::decode(id, &payload)?));
+    }
+    Ok(frames)
+}
+
+/// While commanded (up to `last_cmd`): the angle the `steering` reports rises to the
+/// target, never faster than the rate limit.
+fn steering_ramps_at_its_rate_limit(
+    steering: &[(f64, SteeringReport)],
+    last_cmd: f64,
+) -> Result<()> {
     let steer_period = period_of::<SteeringReport>();
-
-    // While commanded: the angle rises to the target, never faster than the rate limit.
     let limit = ugv_sim_limit();
     let during: Vec<_> = steering.iter().filter(|(t, _)| *t <= last_cmd).collect();
     ensure!(
@@ -230,11 +239,37 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
         "ramp of {ramp:.3} s ({} reports) is faster than the rate limit allows ({min_time:.3} s)",
         end - start
     );
+    Ok(())
+}
 
-    // After the commands stop: both ECUs go to their safe state, with at most one
-    // report period beyond the command timeout still enabled. Counted over the ECU's
-    // enabled run, from a report period after it enabled (its on-change report) to its
-    // safe report.
+/// The times reports `received` at these times were due at, `period` apart. The ECUs'
+/// reports are judged in the ECUs' own time. A simulator that stalls catches up
+/// afterwards, sending its late ticks' reports in a burst, so a report's receive time is
+/// only a bound: never before it was due. While an ECU stays in one state its reports
+/// are periodic (it also reports at once on entering or leaving its enabled state), so
+/// within such a run report i is due at t0 + i periods, t0 the tightest bound the
+/// reports sent on time give. The ticks take in the commands by their kernel receive
+/// times, the ones candump shows: one clock for both.
+fn due_times(received: &[f64], period: f64) -> Vec<f64> {
+    let t0 = received
+        .iter()
+        .enumerate()
+        .map(|(i, t)| t - i as f64 * period)
+        .fold(f64::INFINITY, f64::min);
+    (0..received.len())
+        .map(|i| t0 + i as f64 * period)
+        .collect()
+}
+
+/// After the commands stop (the last at `last_cmd`): both ECUs go to their safe state,
+/// with at most one report period beyond the command timeout still enabled. Counted
+/// over the ECU's enabled run, from a report period after it enabled (its on-change
+/// report) to its safe report.
+fn both_ecus_go_safe_after_the_commands_stop(
+    steering: &[(f64, SteeringReport)],
+    throttle: &[(f64, ThrottleReport)],
+    last_cmd: f64,
+) -> Result<()> {
     for (name, period, timeout, reports) in [
         (
             "steering",
@@ -292,11 +327,6 @@ fn cansent_commands_move_the_steering_at_its_rate_limit_and_silence_trips_the_sa
             "{name}: {still_enabled} enabled reports after the last command, {allowed} allowed"
         );
     }
-    let last_thr = throttle.last().context("no throttle reports")?.1;
-    ensure!(
-        last_thr.brake == 100.0 && last_thr.throttle == 0.0,
-        "{last_thr:?}"
-    );
     Ok(())
 }
 

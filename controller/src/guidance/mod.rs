@@ -261,6 +261,17 @@ pub struct Navigator {
     pub plans: Vec<PlanRecord>,
 }
 
+/// Where a replanning starts: its time, the car's pose and the obstacles reported, and
+/// the car's progress along the route with the route's point there.
+#[derive(Debug)]
+struct Replanning<'a> {
+    now: f64,
+    pose: &'a Pose,
+    obstacles: &'a [Circle],
+    s: f64,
+    here: RoutePoint,
+}
+
 impl Navigator {
     pub fn new(cfg: &ControllerConfig) -> Result<Navigator, GuidanceError> {
         let law = SteeringLaw::from_config(cfg)?;
@@ -437,37 +448,25 @@ impl Navigator {
     /// passages narrower than the planning circle.
     pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
         let s = self.progress_at(pose);
-        let here = self.route.at(s);
-        let pc = &self.cfg.planner;
-        let problems = |goals: &[RoutePoint], r0: f64| -> Vec<(PlanProblem, PathFrame)> {
-            goals
-                .iter()
-                .map(|g| {
-                    let (p, f, _) = self.problem(now, pose, obstacles, &here, g, r0);
-                    (p, f)
-                })
-                .collect()
+        let at = Replanning {
+            now,
+            pose,
+            obstacles,
+            s,
+            here: self.route.at(s),
         };
+        let pc = &self.cfg.planner;
         let wide = self.wide();
         let goal = search::local_goal(&self.route, pc, &wide, s, obstacles);
         let (problem, frame, any_moving) =
-            self.problem(now, pose, obstacles, &here, &goal, wide.r0);
-        let detours = problems(
+            self.problem(now, pose, obstacles, &at.here, &goal, wide.r0);
+        let detours = self.problems(
+            &at,
             &search::detours(&self.route, pc, &wide, s, &goal, obstacles),
             wide.r0,
         );
         let narrow = self.narrow();
-        let through = search::local_goal(&self.route, pc, &narrow, s, obstacles);
-        let mut goals = vec![through];
-        goals.extend(search::detours(
-            &self.route,
-            pc,
-            &narrow,
-            s,
-            &through,
-            obstacles,
-        ));
-        let passages = problems(&goals, narrow.r0);
+        let passages = self.passages(&at, &narrow);
         let end = self.route.local_goal(self.route.length());
         let goal_blocked = !search::clear_of(&end, obstacles, narrow.r0);
         let theta = wrap(pose.theta - frame.angle);
@@ -476,73 +475,10 @@ impl Navigator {
             true => self.traffic(&problem, pose, wide.r0),
             false => (None, false),
         };
-        let follow = leader.map(|l| l.pace);
-        // Behind traffic going its way, the car paces itself on the gap: no fixed pace
-        // faster than that is tried (passing it is a detour's business, and the pass's).
-        let paces = |cap: f64| {
-            let mut speeds: Vec<f64> = pc
-                .pace_fractions
-                .iter()
-                .map(|f| f * pc.cruise_speed)
-                .filter(|&v| v < cap)
-                .chain(cap.is_finite().then_some(cap))
-                .collect();
-            speeds.sort_by(|a, b| b.total_cmp(a));
-            speeds
-        };
-        // Traffic keeping to its line is passed on the side not kept to, on a lane
-        // clear of it, while the route has at least a horizon left to pass it in.
-        let pass = (leader.is_some_and(|l| l.along_line)
-            && self.route.length() - s >= pc.horizon_m)
-            .then(|| {
-                let side = if pc.keep_right { 1.0 } else { -1.0 };
-                let lane = pacing::pass_lane(
-                    &problem.obstacles,
-                    problem.state.x,
-                    problem.state.y,
-                    wide.r0,
-                    side,
-                );
-                Pass {
-                    goals: problems(
-                        &search::pass_goals(&self.route, &wide, s, &goal, lane, obstacles),
-                        wide.r0,
-                    ),
-                    speeds: paces(f64::INFINITY),
-                }
-            });
-        let pacing = any_moving.then(|| {
-            let slowest = pc.pace_fractions.iter().copied().fold(1.0, f64::min) * pc.cruise_speed;
-            let cap = follow.map_or(f64::INFINITY, |v| v.clamp(slowest, pc.cruise_speed));
-            let speeds = paces(cap);
-            Pacing {
-                speeds,
-                speed_now: pose.v.max(0.0),
-                accel: self.cfg.follower.accel_limit,
-                decel: self.cfg.follower.decel,
-                time_margin: pc.moving_time_margin_s,
-                time_weight: pc.pace_time_weight,
-                time_scale: follow
-                    .map_or(1.0, |_| ((self.route.length() - s) / pc.horizon_m).max(1.0)),
-                oncoming,
-                keep_right: pc.keep_right,
-                circle: wide.r0,
-            }
-        });
-        let threshold = if self.aligning.is_some() {
-            pc.align_exit_deg
-        } else {
-            pc.align_enter_deg
-        };
-        let align = (theta.abs() > threshold.to_radians()).then(|| Align {
-            x: pose.x,
-            y: pose.y,
-            theta: pose.theta,
-            // Turn the short way round first.
-            prefer_left: theta < 0.0,
-            turn_radius: self.cfg.vehicle.wheelbase / limit.tan(),
-            obstacles: obstacles.to_vec(),
-        });
+        let pass = self.pass(&at, &problem, &goal, &wide, leader);
+        let pacing =
+            any_moving.then(|| self.pacing(&at, leader.map(|l| l.pace), oncoming, wide.r0));
+        let align = self.align(pose, obstacles, theta, limit);
         let yields = self.yields(now, pose, obstacles, s, &problem);
         let manoeuvre = self.manoeuvre_request(now, pose, obstacles, s, align.is_some());
         PlanRequest {
@@ -565,6 +501,133 @@ impl Navigator {
                 .as_ref()
                 .is_some_and(manoeuvre::Following::on_last_forward),
         }
+    }
+
+    /// The planning problems towards each of `goals` from where the replanning `at`
+    /// starts, with `r0` as the car's circle.
+    fn problems(
+        &self,
+        at: &Replanning<'_>,
+        goals: &[RoutePoint],
+        r0: f64,
+    ) -> Vec<(PlanProblem, PathFrame)> {
+        goals
+            .iter()
+            .map(|g| {
+                let (p, f, _) = self.problem(at.now, at.pose, at.obstacles, &at.here, g, r0);
+                (p, f)
+            })
+            .collect()
+    }
+
+    /// The problems through passages narrower than the planning circle: towards the
+    /// local goal the `narrow` clearance allows, then towards its detours.
+    fn passages(&self, at: &Replanning<'_>, narrow: &Clearance) -> Vec<(PlanProblem, PathFrame)> {
+        let pc = &self.cfg.planner;
+        let through = search::local_goal(&self.route, pc, narrow, at.s, at.obstacles);
+        let mut goals = vec![through];
+        goals.extend(search::detours(
+            &self.route,
+            pc,
+            narrow,
+            at.s,
+            &through,
+            at.obstacles,
+        ));
+        self.problems(at, &goals, narrow.r0)
+    }
+
+    /// The fixed paces to try, fastest first: the planner's fractions of the cruise
+    /// speed below `cap`, and `cap` itself when finite.
+    fn paces(&self, cap: f64) -> Vec<f64> {
+        let pc = &self.cfg.planner;
+        let mut speeds: Vec<f64> = pc
+            .pace_fractions
+            .iter()
+            .map(|f| f * pc.cruise_speed)
+            .filter(|&v| v < cap)
+            .chain(cap.is_finite().then_some(cap))
+            .collect();
+        speeds.sort_by(|a, b| b.total_cmp(a));
+        speeds
+    }
+
+    /// The pass of a `leader` keeping to its line: on the side not kept to, on a lane
+    /// clear of it beside the local goal's `problem` (`goal`, the `wide` clearance),
+    /// while the route has at least a horizon left to pass it in.
+    fn pass(
+        &self,
+        at: &Replanning<'_>,
+        problem: &PlanProblem,
+        goal: &RoutePoint,
+        wide: &Clearance,
+        leader: Option<pacing::Leader>,
+    ) -> Option<Pass> {
+        let pc = &self.cfg.planner;
+        (leader.is_some_and(|l| l.along_line) && self.route.length() - at.s >= pc.horizon_m).then(
+            || {
+                let side = if pc.keep_right { 1.0 } else { -1.0 };
+                let lane = pacing::pass_lane(
+                    &problem.obstacles,
+                    problem.state.x,
+                    problem.state.y,
+                    wide.r0,
+                    side,
+                );
+                Pass {
+                    goals: self.problems(
+                        at,
+                        &search::pass_goals(&self.route, wide, at.s, goal, lane, at.obstacles),
+                        wide.r0,
+                    ),
+                    speeds: self.paces(f64::INFINITY),
+                }
+            },
+        )
+    }
+
+    /// How to pace among moving obstacles, the car's circle `r0`. Behind traffic going
+    /// its way (at pace `follow`), the car paces itself on the gap: no fixed pace faster
+    /// than that is tried (passing it is a detour's business, and the pass's).
+    fn pacing(&self, at: &Replanning<'_>, follow: Option<f64>, oncoming: bool, r0: f64) -> Pacing {
+        let pc = &self.cfg.planner;
+        let slowest = pc.pace_fractions.iter().copied().fold(1.0, f64::min) * pc.cruise_speed;
+        let cap = follow.map_or(f64::INFINITY, |v| v.clamp(slowest, pc.cruise_speed));
+        let speeds = self.paces(cap);
+        Pacing {
+            speeds,
+            speed_now: at.pose.v.max(0.0),
+            accel: self.cfg.follower.accel_limit,
+            decel: self.cfg.follower.decel,
+            time_margin: pc.moving_time_margin_s,
+            time_weight: pc.pace_time_weight,
+            time_scale: follow.map_or(1.0, |_| {
+                ((self.route.length() - at.s) / pc.horizon_m).max(1.0)
+            }),
+            oncoming,
+            keep_right: pc.keep_right,
+            circle: r0,
+        }
+    }
+
+    /// The turn towards the line of a car at `pose` heading `theta` off it (more than
+    /// the align threshold; none otherwise), at the steering `limit`.
+    fn align(&self, pose: &Pose, obstacles: &[Circle], theta: f64, limit: f64) -> Option<Align> {
+        let pc = &self.cfg.planner;
+        let threshold = if self.aligning.is_some() {
+            pc.align_exit_deg
+        } else {
+            pc.align_enter_deg
+        };
+        (theta.abs() > threshold.to_radians()).then(|| Align {
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+            // Turn the short way round first.
+            prefer_left: theta < 0.0,
+            turn_radius: self.cfg.vehicle.wheelbase / limit.tan(),
+            obstacles: obstacles.to_vec(),
+        })
     }
 
     /// The manoeuvre search from `pose` at progress `s` at `now` ([`manoeuvre`]), or
@@ -1085,7 +1148,6 @@ impl Navigator {
             return g;
         }
         let pose = ahead;
-        let (px, py) = self.frame.to_path(pose.x, pose.y);
         if let Some(steer) = self.aligning {
             let theta = wrap(pose.theta - self.frame.angle);
             return Guidance::Drive {
@@ -1101,31 +1163,46 @@ impl Navigator {
             };
         }
         let Some(t) = &self.active else {
-            let pc = &self.cfg.planner;
-            let reason = if self.goal_blocked {
-                format!(
-                    "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
-                )
-            } else if self.manoeuvres_spent() {
-                format!(
-                    "no way through: {} manoeuvres without {} m of progress",
-                    self.manoeuvres, pc.manoeuvre_progress_m
-                )
-            } else if self.recent_reversals > 0 && self.recent_reversals >= pc.max_reversals {
-                let n = self.recent_reversals;
-                format!(
-                    "no forward path after {n} reversal{}",
-                    if n == 1 { "" } else { "s" }
-                )
-            } else if self.no_way_back == WayBack::Blocked {
-                "no forward path, and no clear way back".to_owned()
-            } else if self.no_way_back == WayBack::Unseen {
-                "no forward path, and no way back the laser has seen (it looks forward)".to_owned()
-            } else {
-                "no collision-free path".to_owned()
+            return Guidance::Stop {
+                reason: self.why_no_path(to_goal),
             };
-            return Guidance::Stop { reason };
         };
+        self.drive_along(t, pose, to_goal)
+    }
+
+    /// Why the car stands without a path `to_goal` metres from the goal, in words: the
+    /// goal blocked, the manoeuvres or reversals spent, no way back, or no path at all.
+    fn why_no_path(&self, to_goal: f64) -> String {
+        let pc = &self.cfg.planner;
+        if self.goal_blocked {
+            format!(
+                "goal blocked by an obstacle: stopped {to_goal:.1} m from it, as near as a path leads"
+            )
+        } else if self.manoeuvres_spent() {
+            format!(
+                "no way through: {} manoeuvres without {} m of progress",
+                self.manoeuvres, pc.manoeuvre_progress_m
+            )
+        } else if self.recent_reversals > 0 && self.recent_reversals >= pc.max_reversals {
+            let n = self.recent_reversals;
+            format!(
+                "no forward path after {n} reversal{}",
+                if n == 1 { "" } else { "s" }
+            )
+        } else if self.no_way_back == WayBack::Blocked {
+            "no forward path, and no clear way back".to_owned()
+        } else if self.no_way_back == WayBack::Unseen {
+            "no forward path, and no way back the laser has seen (it looks forward)".to_owned()
+        } else {
+            "no collision-free path".to_owned()
+        }
+    }
+
+    /// Drive along the trajectory `t` from `pose` (where the car will be when the
+    /// command acts), `to_goal` metres from the goal: the steering law's angle, and the
+    /// speed the plan, the curve, the route and the room to stop in allow.
+    fn drive_along(&self, t: &Trajectory, pose: &Pose, to_goal: f64) -> Guidance {
+        let (px, py) = self.frame.to_path(pose.x, pose.y);
         let path = t.path();
         let x = px.clamp(path.x_k(), path.x_f());
         let theta_ref = path.heading(x);

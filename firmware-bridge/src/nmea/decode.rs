@@ -816,8 +816,8 @@ mod tests {
         assert_eq!(parse_number("3.4e38"), Ok(3.4e38));
     }
 
-    #[test]
-    fn published_sentences_decode_field_by_field() {
+    /// Published GGA examples, a single fix and an RTK one, field by field.
+    fn published_gga_decodes_field_by_field() {
         let Ok(Decoded::Gga(g)) =
             decode("GPGGA,092725.00,4717.11399,N,00833.91590,E,1,08,1.01,499.6,M,48.0,M,,")
         else {
@@ -843,7 +843,10 @@ mod tests {
         assert_eq!(g.lon, Some(-(70.0 + 12.765_432_1 / 60.0)));
         assert_eq!((g.alt, g.geoid), (Some(545.445), Some(-46.9)));
         assert_eq!((g.age, g.station), (Some(1.5), Some(42)));
+    }
 
+    /// Published RMC examples (NMEA 4.1 too, and an empty one), field by field.
+    fn published_rmc_decodes_field_by_field() {
         let Ok(Decoded::Rmc(r)) =
             decode("GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E,A")
         else {
@@ -883,6 +886,12 @@ mod tests {
             ),
             (None, false, None, None, None, None, None, None)
         );
+    }
+
+    #[test]
+    fn published_sentences_decode_field_by_field() {
+        published_gga_decodes_field_by_field();
+        published_rmc_decodes_field_by_field();
 
         let Ok(Decoded::Vtg(v)) = decode("GPVTG,77.52,T,,M,0.004,N,0.008,K,A") else {
             panic!("VTG");
@@ -930,43 +939,27 @@ mod tests {
         assert_eq!(decode("GPZDA,,,,,-05,30"), Ok(Decoded::Zda(None, None)));
     }
 
-    #[test]
-    fn each_malformed_field_is_named() {
-        let gga = |i: usize, text: &str| {
-            let mut f: Vec<&str> = "GNGGA,123519.00,4807.0381234,N,01131.0000009,E,4,17,0.62,545.445,M,46.900,M,1.0,0042"
-                .split(',')
-                .collect();
-            f[i] = text;
-            f.join(",")
-        };
-        let rmc = |i: usize, text: &str| {
-            let mut f: Vec<&str> =
-                "GNRMC,123519.00,A,4807.038,N,01131.000,E,0.5,54.7,030624,1.5,E,R,S"
-                    .split(',')
-                    .collect();
-            f[i] = text;
-            f.join(",")
-        };
-        let vtg = |i: usize, text: &str| {
-            let mut f: Vec<&str> = "GNVTG,54.70,T,50.0,M,0.972,N,1.800,K,R"
-                .split(',')
-                .collect();
-            f[i] = text;
-            f.join(",")
-        };
-        let gst = |i: usize, text: &str| {
-            let mut f: Vec<&str> = "GNGST,123519.00,0.012,0.010,0.008,33.5,0.009,0.008,0.021"
-                .split(',')
-                .collect();
-            f[i] = text;
-            f.join(",")
-        };
-        let zda = |i: usize, text: &str| {
-            let mut f: Vec<&str> = "GNZDA,123519.00,03,06,2024,00,00".split(',').collect();
-            f[i] = text;
-            f.join(",")
-        };
-        let cases: Vec<(String, usize)> = vec![
+    /// `sentence` with its field `i` replaced by `text`.
+    fn with_field(sentence: &str, i: usize, text: &str) -> String {
+        let mut f: Vec<&str> = sentence.split(',').collect();
+        f[i] = text;
+        f.join(",")
+    }
+
+    /// Sentences each with one malformed field, beside that field's number.
+    fn malformed_fields() -> Vec<(String, usize)> {
+        const GGA: &str =
+            "GNGGA,123519.00,4807.0381234,N,01131.0000009,E,4,17,0.62,545.445,M,46.900,M,1.0,0042";
+        const RMC: &str = "GNRMC,123519.00,A,4807.038,N,01131.000,E,0.5,54.7,030624,1.5,E,R,S";
+        const VTG: &str = "GNVTG,54.70,T,50.0,M,0.972,N,1.800,K,R";
+        const GST: &str = "GNGST,123519.00,0.012,0.010,0.008,33.5,0.009,0.008,0.021";
+        const ZDA: &str = "GNZDA,123519.00,03,06,2024,00,00";
+        let gga = |i: usize, text: &str| with_field(GGA, i, text);
+        let rmc = |i: usize, text: &str| with_field(RMC, i, text);
+        let vtg = |i: usize, text: &str| with_field(VTG, i, text);
+        let gst = |i: usize, text: &str| with_field(GST, i, text);
+        let zda = |i: usize, text: &str| with_field(ZDA, i, text);
+        vec![
             (gga(1, "1235"), 1),
             (gga(1, "253519.00"), 1),
             (gga(2, "48x7.0"), 2),
@@ -1043,7 +1036,12 @@ mod tests {
             ("HEHDT,1.0,M".into(), 2),
             ("HEHDT,1.0,".into(), 2),
             ("GNTHS,12.0,".into(), 2),
-        ];
+        ]
+    }
+
+    #[test]
+    fn each_malformed_field_is_named() {
+        let cases = malformed_fields();
         for (body, field) in cases {
             let decoded = decode(&body);
             assert_eq!(malformed_field(&decoded), Ok(field), "{body}");
