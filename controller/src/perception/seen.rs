@@ -1,7 +1,8 @@
 //! Space the laser has seen free: every beam marks the cells between the scanner and its
 //! return (or its range, capped) as seen, and the car's own rectangle is seen where it
-//! stands; the cell of each return is remembered as a hit until a beam passes through
-//! it. The laser looks forward, so what lies behind the car is known only from what
+//! stands; the cell of each return is remembered as a hit until beams passing through
+//! it outweigh the returns from it (a post's cell is grazed by beams that pass beside
+//! it, scan after scan, as well as returned from). The laser looks forward, so what lies behind the car is known only from what
 //! it saw before (or from where it drove): a manoeuvre backs only into seen space
 //! (`guidance::manoeuvre`). A world grid of 0.25 m cells, filed in chunks of 8 x 8 m, so
 //! a long route costs memory only where the car has been.
@@ -20,15 +21,25 @@ const SHORT_OF_HIT: f64 = 0.3;
 /// Beams marked per scan are at least this far apart, radians (1.5 degrees: 0.26 m
 /// apart at the reach).
 const BEAM_SPACING: f64 = 0.026;
+/// The evidence a return adds to its cell, a beam passing through takes away, and the
+/// most a cell holds: a cell is a hit while it holds any. Returned from three times as
+/// strongly as passed through, a surface stays remembered though beams graze its cell;
+/// a walker's cells clear within [`HIT_CAP`] beams once it has gone.
+const HIT_GAIN: u8 = 3;
+const PASS_LOSS: u8 = 1;
+const HIT_CAP: u8 = 12;
+
+/// A chunk's hit evidence, one byte a cell.
+type Evidence = [[u8; CHUNK as usize]; CHUNK as usize];
 
 /// The seen space.
 #[derive(Clone, Debug, Default)]
 pub struct SeenSpace {
     chunks: HashMap<(i64, i64), [u32; CHUNK as usize]>,
-    /// Cells a beam returned from (and none has passed through since): what the laser
-    /// saw of the obstacles, remembered once they are out of its view (perception's
-    /// tracks of them are dropped then).
-    hits: HashMap<(i64, i64), [u32; CHUNK as usize]>,
+    /// Evidence of returns per cell ([`HIT_GAIN`]): what the laser saw of the
+    /// obstacles, remembered once they are out of its view (perception's tracks of
+    /// them are dropped then).
+    hits: HashMap<(i64, i64), Evidence>,
 }
 
 /// SeenSpace space over a window of the world, copied out for one search.
@@ -80,17 +91,6 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64
 
 type Chunks = HashMap<(i64, i64), [u32; CHUNK as usize]>;
 
-fn set(chunks: &mut Chunks, (i, j): (i64, i64), on: bool) {
-    let key = (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
-    let bit = 1 << i.rem_euclid(CHUNK);
-    let row = j.rem_euclid(CHUNK) as usize;
-    if on {
-        chunks.entry(key).or_insert([0; CHUNK as usize])[row] |= bit;
-    } else if let Some(c) = chunks.get_mut(&key) {
-        c[row] &= !bit;
-    }
-}
-
 fn get(chunks: &Chunks, (i, j): (i64, i64)) -> bool {
     chunks
         .get(&(i.div_euclid(CHUNK), j.div_euclid(CHUNK)))
@@ -115,7 +115,8 @@ impl SeenSpace {
             }
             if let Some(hits) = self.hits.get_mut(&key) {
                 for &(i, j) in &cells[k..end] {
-                    hits[j.rem_euclid(CHUNK) as usize] &= !(1 << i.rem_euclid(CHUNK));
+                    let e = &mut hits[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
+                    *e = e.saturating_sub(PASS_LOSS);
                 }
             }
             k = end;
@@ -137,9 +138,9 @@ impl SeenSpace {
                 continue;
             }
             for (r, row) in rows.iter().enumerate() {
-                for b in 0..CHUNK {
-                    let (i, j) = (bi + b, bj + r as i64);
-                    if row & (1 << b) != 0 && (i0..=i1).contains(&i) && (j0..=j1).contains(&j) {
+                for (b, &e) in row.iter().enumerate() {
+                    let (i, j) = (bi + b as i64, bj + r as i64);
+                    if e > 0 && (i0..=i1).contains(&i) && (j0..=j1).contains(&j) {
                         out.push([(i as f64 + 0.5) * CELL, (j as f64 + 0.5) * CELL]);
                     }
                 }
@@ -154,6 +155,17 @@ impl SeenSpace {
     /// Whether (x, y) has been seen.
     pub fn seen(&self, x: f64, y: f64) -> bool {
         self.cell_seen(cell(x, y))
+    }
+
+    /// A beam returned from `(i, j)`: [`HIT_GAIN`] more evidence there.
+    fn returned(&mut self, (i, j): (i64, i64)) {
+        let key = (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
+        let chunk = self
+            .hits
+            .entry(key)
+            .or_insert([[0; CHUNK as usize]; CHUNK as usize]);
+        let e = &mut chunk[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
+        *e = e.saturating_add(HIT_GAIN).min(HIT_CAP);
     }
 
     /// Mark what the scan saw, the laser at `laser` (world frame).
@@ -176,7 +188,7 @@ impl SeenSpace {
             traverse(laser.x, laser.y, c, s, reach.max(0.0), &mut ray);
             self.mark_cells(&ray);
             if let Some(r) = hit {
-                set(&mut self.hits, cell(laser.x + r * c, laser.y + r * s), true);
+                self.returned(cell(laser.x + r * c, laser.y + r * s));
             }
         }
     }
@@ -247,8 +259,11 @@ impl SeenWindow {
 }
 
 /// Whether the car's rectangle at `pose` (`front` ahead of it, `rear` behind,
-/// `half_width` either side) lies in seen space, by `seen` at its corners, the middles
-/// of its sides and its centre.
+/// `half_width` either side) lies in seen space, by `seen` along its four sides every
+/// half a cell at most. The sides are what moves into new space: a path sampled more
+/// finely than a cell sweeps them over everything the rectangle covers. (Its corners
+/// and the middles of its sides alone, 1.2 m apart, let a reversal end on a post the
+/// laser never saw between them.)
 pub fn rectangle_seen(
     seen: impl Fn(f64, f64) -> bool,
     [x, y, theta]: [f64; 3],
@@ -257,11 +272,13 @@ pub fn rectangle_seen(
     half_width: f64,
 ) -> bool {
     let (c, s) = (theta.cos(), theta.sin());
-    let mid = (front - rear) / 2.0;
-    [-rear, mid, front]
-        .into_iter()
-        .flat_map(|u| [-half_width, 0.0, half_width].map(|v| (u, v)))
-        .all(|(u, v)| seen(x + u * c - v * s, y + u * s + v * c))
+    let at = |u: f64, v: f64| seen(x + u * c - v * s, y + u * s + v * c);
+    let steps = |len: f64| ((len / (CELL / 2.0)).ceil() as usize).max(1);
+    let (nu, nv) = (steps(front + rear), steps(2.0 * half_width));
+    let along = |k: usize| -rear + (front + rear) * k as f64 / nu as f64;
+    let across = |k: usize| -half_width + 2.0 * half_width * k as f64 / nv as f64;
+    (0..=nu).all(|k| at(along(k), -half_width) && at(along(k), half_width))
+        && (1..nv).all(|k| at(-rear, across(k)) && at(front, across(k)))
 }
 
 #[cfg(test)]
@@ -293,7 +310,8 @@ mod tests {
         assert!(!seen.seen(6.2, 1.1));
         // North: no return, marked to the reach.
         assert!(seen.seen(1.1, 10.5) && !seen.seen(1.1, 11.5));
-        // The return is remembered, until a beam passes through its cell.
+        // The return is remembered, until beams passing through its cell outweigh it:
+        // one return against three passes.
         assert_eq!(seen.hits_in([0.0, 0.0], [10.0, 10.0]), vec![[6.125, 1.125]]);
         assert!(seen.hits_in([7.0, 0.0], [10.0, 10.0]).is_empty());
         let far = [9.0f32];
@@ -302,19 +320,21 @@ mod tests {
             ranges: &far,
             ..scan
         };
-        seen.update(
-            &through,
-            &Pose2 {
-                x: 1.0,
-                y: 1.1,
-                yaw: 0.0,
-            },
-        );
-        assert!(
+        let laser = Pose2 {
+            x: 1.0,
+            y: 1.1,
+            yaw: 0.0,
+        };
+        let near = |seen: &SeenSpace| {
             seen.hits_in([0.0, 0.0], [10.0, 10.0])
                 .iter()
-                .all(|h| h[0] > 9.0)
-        );
+                .any(|h| h[0] < 9.0)
+        };
+        seen.update(&through, &laser);
+        seen.update(&through, &laser);
+        assert!(near(&seen), "grazed twice, still remembered");
+        seen.update(&through, &laser);
+        assert!(!near(&seen), "passed through three times, forgotten");
         // West (the dropout) and behind: nothing.
         assert!(!seen.seen(-1.0, 1.1));
         let w = seen.window([0.0, 0.0], [8.0, 8.0]);
@@ -344,5 +364,27 @@ mod tests {
         seen.mark_rectangle([10.0, -10.0, std::f64::consts::FRAC_PI_2], 3.0, 2.0, 0.6);
         assert!(seen.seen(10.0, -12.9) && seen.seen(10.5, -8.1));
         assert!(!seen.seen(10.0, -13.4) && !seen.seen(11.0, -10.0));
+    }
+
+    #[test]
+    fn a_rectangle_with_one_unseen_cell_on_its_side_or_back_is_not_seen() {
+        // The golf car's rectangle at the origin, heading east; one cell unseen where
+        // the old check (corners, middles of the sides) never looked.
+        for hole in [[0.2, 0.6], [-0.375, 0.3], [1.5, -0.6], [2.025, -0.25]] {
+            let seen = |x: f64, y: f64| {
+                (x - hole[0]).abs() > CELL / 2.0 || (y - hole[1]).abs() > CELL / 2.0
+            };
+            assert!(
+                !rectangle_seen(seen, [0.0, 0.0, 0.0], 2.025, 0.375, 0.6),
+                "{hole:?}"
+            );
+        }
+        assert!(rectangle_seen(
+            |_, _| true,
+            [0.0, 0.0, 0.0],
+            2.025,
+            0.375,
+            0.6
+        ));
     }
 }
