@@ -40,6 +40,9 @@ const SWEEP_STEP: f64 = 0.3;
 /// (among its first this many samples), metres.
 const OFF_PATH: f64 = 0.3;
 const OFF_PATH_LOOK: usize = 20;
+/// Goals searched towards at most, the first the field clears (a goal clear of the
+/// obstacles in view may stand on a remembered return).
+const GOALS_SEARCHED: usize = 3;
 /// The manoeuvre being followed is kept while it clears every obstacle by the margin
 /// less this, metres.
 pub const HOLD_SLACK: f64 = 0.1;
@@ -49,7 +52,7 @@ pub const HOLD_SLACK: f64 = 0.1;
 #[derive(Clone, Debug)]
 pub struct ManoeuvreRequest {
     pub start: [f64; 3],
-    /// Goals to try, in order.
+    /// Goals to try, in order ([`GOALS_SEARCHED`] of them at most).
     pub goals: Vec<Goal>,
     pub obstacles: Vec<Circle>,
     pub footprint: Footprint,
@@ -172,15 +175,25 @@ impl ManoeuvreRequest {
         })
     }
 
-    /// Search towards each goal in turn, within one budget of expansions for all: the
-    /// first complete manoeuvre found, else the first partial one
+    /// Search towards each goal the field clears in turn ([`GOALS_SEARCHED`] at most),
+    /// within one budget of expansions for all: the first complete manoeuvre found, else
+    /// the first partial one
     /// ([`hybrid::Found::complete`]), smoothed; with the expansions all the searches
     /// took; or the last goal's failure.
     pub fn plan(&self, field: &Field) -> (Result<Planned, Failure>, usize) {
         let mut expansions = 0;
         let mut partial = None;
         let mut last = Err(Failure::Unreachable);
+        let mut searched = 0;
         for goal in &self.goals {
+            if !field.clear(goal.pose) {
+                last = Err(Failure::GoalBlocked);
+                continue;
+            }
+            if searched == GOALS_SEARCHED {
+                break;
+            }
+            searched += 1;
             let settings = Settings {
                 max_expansions: self.settings.max_expansions.saturating_sub(expansions),
                 ..self.settings

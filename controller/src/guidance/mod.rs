@@ -185,11 +185,9 @@ const MANOEUVRE_RETRY_S: f64 = 2.0;
 const MANOEUVRE_TRAFFIC_RANGE: f64 = 12.0;
 /// A manoeuvre aims this far along the route ahead (the first within reach of the
 /// route's end: the goal), metres, at these offsets sideways (left positive), metres,
-/// and at most at this many goals, each within this of it and of the route's heading
-/// (metres, radians).
+/// each goal within this of it and of the route's heading (metres, radians).
 const MANOEUVRE_AHEAD: [f64; 4] = [8.0, 11.0, 5.0, 14.0];
 const MANOEUVRE_OFFSETS: [f64; 5] = [0.0, 1.0, -1.0, 2.0, -2.0];
-const MANOEUVRE_GOALS: usize = 3;
 const MANOEUVRE_GOAL_XY: f64 = 0.5;
 const MANOEUVRE_GOAL_HEADING: f64 = 0.35;
 
@@ -690,7 +688,8 @@ impl Navigator {
     /// Where a manoeuvre from progress `s` aims: the goal once within reach (anywhere in
     /// its tolerance, any heading), else poses on the route ahead at the route's
     /// heading, a few distances and offsets sideways, those the car's rectangle clears
-    /// (at most [`MANOEUVRE_GOALS`]).
+    /// among the obstacles in view (the search takes the first few that its map, with
+    /// the remembered returns, clears too).
     fn manoeuvre_goals(
         &self,
         s: f64,
@@ -717,9 +716,7 @@ impl Navigator {
                 let p = self.route.at((s + ahead).min(self.route.length()));
                 let (c, sn) = (p.heading.cos(), p.heading.sin());
                 let pose = [p.x - offset * sn, p.y + offset * c, p.heading];
-                if goals.len() < MANOEUVRE_GOALS
-                    && footprint.clear_at(pose[0], pose[1], pose[2], &statics)
-                {
+                if footprint.clear_at(pose[0], pose[1], pose[2], &statics) {
                     goals.push(manoeuvre::Goal {
                         pose,
                         tol_xy: MANOEUVRE_GOAL_XY,

@@ -169,3 +169,26 @@ fn the_search_is_the_same_every_time() {
     let field = req.field();
     assert_eq!(req.plan(&field), req.plan(&field));
 }
+
+#[test]
+fn goals_on_remembered_returns_are_passed_over_for_the_next_ones() {
+    // Three goals ahead stand on returns the laser saw and no longer sees (in the
+    // field, not among the obstacles in view); the fourth is clear and is reached.
+    let goals = [[8.0, 0.0], [8.0, 1.0], [8.0, -1.0], [11.0, 0.0]];
+    let mut req = request([0.0, 0.0, 0.0], [0.0; 3], Vec::new());
+    req.goals = goals
+        .iter()
+        .map(|g| Goal {
+            pose: [g[0], g[1], 0.0],
+            tol_xy: 0.3,
+            tol_theta: 0.2,
+        })
+        .collect();
+    req.remembered = vec![[9.0, 0.0], [9.0, 1.0], [9.0, -1.0]];
+    let field = req.field();
+    assert!(req.goals[..3].iter().all(|g| !field.clear(g.pose)));
+    let (result, _) = req.plan(&field);
+    let m = result.expect("a manoeuvre").manoeuvre;
+    let end = m.points[m.points.len() - 1];
+    assert!((end.x - 11.0).hypot(end.y) <= 0.3 + 1e-6, "{end:?}");
+}
