@@ -277,3 +277,28 @@ pub fn replay_hil_recording(
     }
     Ok(report)
 }
+
+/// Every frame on the bus passed the ECUs' E2E checks, both ways, by a HIL `verdict`'s
+/// counts, with more than `min_accepted` accepted by each ECU.
+pub fn every_frame_passed_the_e2e_checks(
+    verdict: &serde_json::Value,
+    min_accepted: u64,
+) -> anyhow::Result<()> {
+    use anyhow::{Context, ensure};
+    for node in ["steering_can", "throttle_can"] {
+        let e2e = &verdict[node]["e2e"];
+        let accepted = e2e["accepted"].as_u64().context("accepted")?;
+        ensure!(accepted > min_accepted, "{node}: only {accepted} frames");
+        for key in [
+            "bad_crc",
+            "repeated_counter",
+            "skipped_counter",
+            "wrong_dlc",
+            "unknown_id",
+            "second_sender",
+        ] {
+            ensure!(e2e[key] == 0, "{node}: {key} = {}", e2e[key]);
+        }
+    }
+    Ok(())
+}

@@ -15,7 +15,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, ensure};
-use ugv_e2e_tests::{TestVcan, workspace_bin};
+use ugv_e2e_tests::{TestVcan, every_frame_passed_the_e2e_checks, workspace_bin};
 
 fn example_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/python")
@@ -159,21 +159,7 @@ fn the_python_example_controller_drives_round_the_post_to_the_goal_in_hil() -> R
         "the example passed the post {clearance} m off"
     );
     // The example's E2E is right: the ECUs accepted its frames and rejected none.
-    for node in ["steering_can", "throttle_can"] {
-        let e2e = &verdict[node]["e2e"];
-        let accepted = e2e["accepted"].as_u64().context("accepted")?;
-        ensure!(accepted > 500, "{node}: only {accepted} frames");
-        for key in [
-            "bad_crc",
-            "repeated_counter",
-            "skipped_counter",
-            "wrong_dlc",
-            "unknown_id",
-            "second_sender",
-        ] {
-            ensure!(e2e[key] == 0, "{node}: {key} = {}", e2e[key]);
-        }
-    }
+    every_frame_passed_the_e2e_checks(&verdict, 500)?;
     ensure!(
         controller_status.is_some_and(|s| s.success()),
         "the example did not end by itself with status 0 ({controller_status:?})"
