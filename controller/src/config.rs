@@ -711,7 +711,7 @@ pub const BOUNDS: &[Bound<ControllerConfig>] = &[
             100.0,
             1e6,
             "",
-            "search effort: 20,000 expansions take about 10-40 ms on a laptop core",
+            "search effort: at 20,000, p50 13 ms, p99 0.9 s here (BENCHMARKS.md)",
         )
     ),
     row!(

@@ -18,6 +18,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
+use ugv_controller::config::FollowerKind;
 use ugv_controller::guidance::Footprint;
 use ugv_controller::guidance::manoeuvre::{Disc, Field, Goal, Settings, hybrid};
 
@@ -118,12 +119,8 @@ pub enum WayThrough {
 /// Search the scenario's world for a way from its start to its goal.
 pub fn way_through(scenario: &Scenario, opts: &Options) -> WayThrough {
     let v = &scenario.vehicle;
-    let car = Footprint {
-        front: v.length - v.rear_overhang,
-        rear: v.rear_overhang,
-        half_width: v.width / 2.0,
-        margin: opts.margin,
-    };
+    let cfg = crate::mission::controller_config(scenario, FollowerKind::Optimal);
+    let car = Footprint::of(&cfg.vehicle, opts.margin);
     let discs: Vec<Disc> = scenario.obstacles.iter().flat_map(discs).collect();
     let start = [scenario.start.x, scenario.start.y, scenario.start.heading()];
     // The verdict counts the goal reached at any heading.

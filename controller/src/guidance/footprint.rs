@@ -28,6 +28,17 @@ pub struct Footprint {
 }
 
 impl Footprint {
+    /// The rectangle of the car `v` (its length, width and rear overhang), grown by
+    /// `margin`.
+    pub fn of(v: &crate::config::Vehicle, margin: f64) -> Footprint {
+        Footprint {
+            front: v.length - v.rear_overhang,
+            rear: v.rear_overhang,
+            half_width: v.width / 2.0,
+            margin,
+        }
+    }
+
     /// The distance from the rectangle of the car at (x, y, heading) to the point
     /// (px, py); 0 inside.
     pub fn distance(&self, x: f64, y: f64, heading: f64, px: f64, py: f64) -> f64 {

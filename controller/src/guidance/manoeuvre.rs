@@ -186,12 +186,12 @@ impl ManoeuvreRequest {
         let mut last = Err(Failure::Unreachable);
         let mut searched = 0;
         for goal in &self.goals {
+            if searched == GOALS_SEARCHED {
+                break;
+            }
             if !field.clear(goal.pose) {
                 last = Err(Failure::GoalBlocked);
                 continue;
-            }
-            if searched == GOALS_SEARCHED {
-                break;
             }
             searched += 1;
             let settings = Settings {

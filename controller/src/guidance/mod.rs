@@ -344,13 +344,7 @@ impl Navigator {
 
     /// The car's rectangle grown by the passage margin.
     pub fn footprint(&self) -> Footprint {
-        let v = &self.cfg.vehicle;
-        Footprint {
-            front: v.length - v.rear_overhang,
-            rear: v.rear_overhang,
-            half_width: v.width / 2.0,
-            margin: self.cfg.planner.passage_margin,
-        }
+        Footprint::of(&self.cfg.vehicle, self.cfg.planner.passage_margin)
     }
 
     /// What paths through passages are planned with: the car's half width plus the
