@@ -7,6 +7,7 @@ pub mod anfis;
 pub mod car;
 pub mod config;
 pub mod core;
+pub mod grid;
 pub mod guidance;
 pub mod intrusion;
 pub mod localisation;

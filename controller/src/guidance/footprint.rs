@@ -43,11 +43,17 @@ impl Footprint {
     /// (px, py); 0 inside.
     pub fn distance(&self, x: f64, y: f64, heading: f64, px: f64, py: f64) -> f64 {
         let (c, s) = (heading.cos(), heading.sin());
-        let (dx, dy) = (px - x, py - y);
+        let (du, dv) = self.outside(c, s, px - x, py - y);
+        du.hypot(dv)
+    }
+
+    /// How far the point (`dx`, `dy`) from the rear axle lies outside the rectangle,
+    /// along the car and across it, the car heading (cos `c`, sin `s`).
+    pub fn outside(&self, c: f64, s: f64, dx: f64, dy: f64) -> (f64, f64) {
         let (u, v) = (c * dx + s * dy, -s * dx + c * dy);
         let du = (u - u.clamp(-self.rear, self.front)).abs();
         let dv = (v - v.clamp(-self.half_width, self.half_width)).abs();
-        du.hypot(dv)
+        (du, dv)
     }
 
     /// Whether the car at (x, y, heading) clears every static obstacle (moving ones

@@ -181,6 +181,37 @@ const SEEN_TURN: f64 = 0.05;
 const SEEN_CHECK_STEP: f64 = 0.2;
 /// After a manoeuvre search that found nothing, none for this long, seconds.
 const MANOEUVRE_RETRY_S: f64 = 2.0;
+
+/// How many times `manoeuvre_expansions` the next manoeuvre search may take: each
+/// search that finds nothing gives the next [`SearchEffort::GROWTH`] times its effort,
+/// up to [`SearchEffort::MAX`] times the first, and one that finds a manoeuvre sets it
+/// back. A car standing before a tight place searches the same map again, deeper each
+/// time, instead of giving up where the first budget ran out (a bound in expansions,
+/// not time: SIL stays deterministic).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct SearchEffort(u32);
+
+impl SearchEffort {
+    const FIRST: SearchEffort = SearchEffort(1);
+    const GROWTH: u32 = 4;
+    const MAX: u32 = 16;
+
+    /// The effort after a search that `failed` (found nothing) or `found` a manoeuvre.
+    fn after(self, failed: bool, found: bool) -> SearchEffort {
+        if failed {
+            SearchEffort((self.0 * Self::GROWTH).min(Self::MAX))
+        } else if found {
+            Self::FIRST
+        } else {
+            self
+        }
+    }
+
+    /// The expansions of a search with a first budget of `base`.
+    fn expansions(self, base: u32) -> usize {
+        base as usize * self.0 as usize
+    }
+}
 /// No manoeuvre is searched with a moving obstacle this near the car, metres.
 const MANOEUVRE_TRAFFIC_RANGE: f64 = 12.0;
 /// A manoeuvre aims this far along the route ahead (the first within reach of the
@@ -252,6 +283,8 @@ pub struct Navigator {
     /// [`MANOEUVRE_RETRY_S`] (a car standing in a dead end would search at every
     /// replanning).
     search_failed_at: Option<f64>,
+    /// What the next manoeuvre search may take.
+    search_effort: SearchEffort,
     /// Space the laser has seen free, or the car stood in: manoeuvres back only into it.
     seen: crate::perception::SeenSpace,
     /// When and from where `seen` was last marked.
@@ -300,6 +333,7 @@ impl Navigator {
             manoeuvres: 0,
             manoeuvre_best: 0.0,
             search_failed_at: None,
+            search_effort: SearchEffort::FIRST,
             seen: crate::perception::SeenSpace::default(),
             seen_at: None,
             plans: Vec::new(),
@@ -668,7 +702,7 @@ impl Navigator {
                 footprint,
                 settings: manoeuvre::Settings {
                     turn_radius: v.wheelbase / limit.tan(),
-                    max_expansions: pc.manoeuvre_expansions as usize,
+                    max_expansions: self.search_effort.expansions(pc.manoeuvre_expansions),
                     ..manoeuvre::Settings::default()
                 },
                 following: self.manoeuvre.as_ref().map(manoeuvre::Following::rest),
@@ -888,6 +922,7 @@ impl Navigator {
                 if failed {
                     self.search_failed_at = Some(outcome.time);
                 }
+                self.search_effort = self.search_effort.after(failed, plan.is_some());
                 if !holds {
                     // A polynomial path, none, or a new manoeuvre: not the one followed.
                     self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m));
@@ -1262,6 +1297,20 @@ mod tests {
     use super::search::{MAX_DETOURS, clear_of};
     use super::*;
     use crate::perception::{PerceptionConfig, cover_segment};
+
+    #[test]
+    fn each_search_that_finds_nothing_deepens_the_next_up_to_a_bound_and_a_find_resets_it() {
+        let mut e = SearchEffort::FIRST;
+        let mut budgets = Vec::new();
+        for _ in 0..4 {
+            budgets.push(e.expansions(20_000));
+            e = e.after(true, false);
+        }
+        assert_eq!(budgets, [20_000, 80_000, 320_000, 320_000]);
+        // A kept manoeuvre (neither failed nor new) leaves the effort as it is.
+        assert_eq!(e.after(false, false), e);
+        assert_eq!(e.after(false, true), SearchEffort::FIRST);
+    }
 
     /// The default configuration with the goal at (goal_x, 0): a straight mission east.
     fn east_to(goal_x: f64) -> ControllerConfig {

@@ -8,6 +8,7 @@
 //! a long route costs memory only where the car has been.
 
 use super::{Beam, Pose2, Scan};
+use crate::grid::Grid;
 use std::collections::HashMap;
 
 /// Side of a cell, metres.
@@ -45,10 +46,7 @@ pub struct SeenSpace {
 /// SeenSpace space over a window of the world, copied out for one search.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SeenWindow {
-    x0: f64,
-    y0: f64,
-    nx: usize,
-    ny: usize,
+    grid: Grid,
     cells: Vec<bool>,
 }
 
@@ -236,10 +234,13 @@ impl SeenSpace {
             }
         }
         SeenWindow {
-            x0: i0 as f64 * CELL,
-            y0: j0 as f64 * CELL,
-            nx,
-            ny,
+            grid: Grid {
+                x0: i0 as f64 * CELL,
+                y0: j0 as f64 * CELL,
+                res: CELL,
+                nx,
+                ny,
+            },
             cells,
         }
     }
@@ -248,13 +249,7 @@ impl SeenSpace {
 impl SeenWindow {
     /// Whether (x, y) has been seen (outside the window: no).
     pub fn seen(&self, x: f64, y: f64) -> bool {
-        let i = ((x - self.x0) / CELL).floor();
-        let j = ((y - self.y0) / CELL).floor();
-        i >= 0.0
-            && j >= 0.0
-            && (i as usize) < self.nx
-            && (j as usize) < self.ny
-            && self.cells[j as usize * self.nx + i as usize]
+        self.grid.index(x, y).is_some_and(|k| self.cells[k])
     }
 }
 

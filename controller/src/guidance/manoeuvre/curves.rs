@@ -40,23 +40,30 @@ impl Curve {
     /// The curve from `from` sampled every `step` metres or less (the start excluded,
     /// every arc's end included).
     pub fn sample(&self, from: [f64; 3], step: f64) -> Vec<PathPoint> {
+        self.points(from, step).collect()
+    }
+
+    /// The samples of [`Curve::sample`], one by one (a check that fails early samples
+    /// no further).
+    pub fn points(&self, from: [f64; 3], step: f64) -> impl Iterator<Item = PathPoint> + '_ {
         let mut at = from;
-        let mut out = Vec::new();
-        for a in &self.arcs {
-            let n = (a.length / step).ceil().max(1.0) as usize;
-            let d = if a.forward { a.length } else { -a.length } / n as f64;
-            for _ in 0..n {
+        self.arcs
+            .iter()
+            .flat_map(move |a| {
+                let n = (a.length / step).ceil().max(1.0) as usize;
+                let d = if a.forward { a.length } else { -a.length } / n as f64;
+                (0..n).map(move |_| (d, a))
+            })
+            .map(move |(d, a)| {
                 at = arc(at, d, a.curvature);
-                out.push(PathPoint {
+                PathPoint {
                     x: at[0],
                     y: at[1],
                     theta: at[2],
                     curvature: a.curvature,
                     forward: a.forward,
-                });
-            }
-        }
-        out
+                }
+            })
     }
 
     /// Where the curve ends from `from`.
@@ -69,8 +76,9 @@ impl Curve {
 }
 
 /// Every verified Reeds-Shepp curve from `from` to `to` (x, y, heading) for the turning
-/// radius `radius`, shortest first.
-pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> Vec<Curve> {
+/// radius `radius`, shortest first; each verified as it is taken (the search's
+/// heuristic takes one).
+pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> impl Iterator<Item = Curve> {
     // The crate works in units of the turning radius, with headings in degrees.
     let pose = |p: [f64; 3]| rs::Pose {
         x: p[0] / radius,
@@ -95,17 +103,17 @@ pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> Vec<Curve> {
             let length = arcs.iter().map(|a| a.length).sum();
             Curve { arcs, length }
         })
-        .filter(|c| c.length.is_finite() && reaches(c.end(from), to))
+        .filter(|c| c.length.is_finite())
         .collect();
     out.sort_by(|a, b| a.length.total_cmp(&b.length));
-    out
+    out.into_iter().filter(move |c| reaches(c.end(from), to))
 }
 
 /// The shortest curve's length from `from` to `to`: the non-holonomic heuristic
 /// without obstacles. Infinite when no curve verifies.
 pub fn shortest(from: [f64; 3], to: [f64; 3], radius: f64) -> f64 {
     curves(from, to, radius)
-        .first()
+        .next()
         .map_or(f64::INFINITY, |c| c.length)
 }
 
@@ -130,7 +138,7 @@ mod tests {
             [0.5, 0.5, 2.5],
         ];
         for to in goals {
-            let all = curves([0.0, 0.0, 0.0], to, r);
+            let all: Vec<Curve> = curves([0.0, 0.0, 0.0], to, r).collect();
             assert!(!all.is_empty(), "no curve to {to:?}");
             for c in &all {
                 let end = c.sample([0.0, 0.0, 0.0], 0.05).last().copied();
@@ -142,14 +150,14 @@ mod tests {
         // Straight ahead: the curve is the straight line.
         assert!((shortest([0.0, 0.0, 0.0], [10.0, 0.0, 0.0], r) - 10.0).abs() < 1e-9);
         // Straight back: the same, in reverse.
-        let back = &curves([0.0, 0.0, 0.0], [-3.0, 0.0, 0.0], r)[0];
+        let back = &curves([0.0, 0.0, 0.0], [-3.0, 0.0, 0.0], r).collect::<Vec<_>>()[0];
         assert!((back.length - 3.0).abs() < 1e-9 && !back.arcs[0].forward);
     }
 
     #[test]
     fn turning_round_on_the_spot_takes_cusps() {
         // The same place facing the other way: no curve without a change of direction.
-        let c = &curves([0.0, 0.0, 0.0], [0.0, 0.0, PI], 2.4)[0];
+        let c = &curves([0.0, 0.0, 0.0], [0.0, 0.0, PI], 2.4).collect::<Vec<_>>()[0];
         assert!(c.cusps() >= 1, "{c:?}");
         assert!(c.length > 2.4 && c.length < 4.0 * 2.4 * PI);
     }

@@ -7,6 +7,7 @@
 
 use super::super::footprint::Footprint;
 use super::path::PathPoint;
+use crate::grid::Grid;
 use crate::perception::{SeenWindow, rectangle_seen};
 
 /// Distances are capped at this, metres (beyond it every pose is clear anyway).
@@ -29,17 +30,15 @@ pub struct Disc {
 /// The distance field over a window, and the car's rectangle.
 #[derive(Clone, Debug)]
 pub struct Field {
-    x0: f64,
-    y0: f64,
-    res: f64,
-    nx: usize,
-    ny: usize,
+    grid: Grid,
     dist: Vec<f32>,
     discs: Vec<Disc>,
     buckets: std::collections::HashMap<(i32, i32), Vec<u32>>,
     /// The largest disc's radius (how far from its bucket a disc reaches).
     max_r: f64,
     car: Footprint,
+    /// The radius of the [`COVER`] discs covering the rectangle, its margin included.
+    cover: f64,
     /// Space seen free: the car backs only into it (None: everywhere).
     seen: Option<SeenWindow>,
 }
@@ -48,19 +47,16 @@ impl Field {
     /// The field over the window `lo`..`hi` (world frame) at `res` metres per cell,
     /// for the car's rectangle `car` (its margin included).
     pub fn new(lo: [f64; 2], hi: [f64; 2], res: f64, discs: Vec<Disc>, car: Footprint) -> Field {
-        let nx = (((hi[0] - lo[0]) / res).ceil().max(1.0)) as usize;
-        let ny = (((hi[1] - lo[1]) / res).ceil().max(1.0)) as usize;
+        let grid = Grid::covering(lo, hi, res);
+        let half = (car.front + car.rear) / 2.0;
         let mut field = Field {
-            x0: lo[0],
-            y0: lo[1],
-            res,
-            nx,
-            ny,
-            dist: vec![CAP as f32; nx * ny],
+            grid,
+            dist: vec![CAP as f32; grid.len()],
             discs: Vec::new(),
             buckets: std::collections::HashMap::new(),
             max_r: 0.0,
             car,
+            cover: (half / COVER as f64).hypot(car.half_width) + car.margin,
             seen: None,
         };
         for d in discs {
@@ -99,10 +95,11 @@ impl Field {
         let reach = d.r + CAP;
         let (i0, j0) = self.cell(d.x - reach, d.y - reach);
         let (i1, j1) = self.cell(d.x + reach, d.y + reach);
-        for j in j0.max(0)..=j1.min(self.ny as i64 - 1) {
-            for i in i0.max(0)..=i1.min(self.nx as i64 - 1) {
-                let (cx, cy) = self.centre(i as usize, j as usize);
-                let k = j as usize * self.nx + i as usize;
+        let g = self.grid;
+        for j in j0.max(0)..=j1.min(g.ny as i64 - 1) {
+            for i in i0.max(0)..=i1.min(g.nx as i64 - 1) {
+                let k = j as usize * g.nx + i as usize;
+                let (cx, cy) = g.centre(k);
                 let e = ((cx - d.x).hypot(cy - d.y) - d.r) as f32;
                 if e < self.dist[k] {
                     self.dist[k] = e;
@@ -117,47 +114,34 @@ impl Field {
     }
 
     fn cell(&self, x: f64, y: f64) -> (i64, i64) {
+        let g = &self.grid;
         (
-            ((x - self.x0) / self.res).floor() as i64,
-            ((y - self.y0) / self.res).floor() as i64,
-        )
-    }
-
-    fn centre(&self, i: usize, j: usize) -> (f64, f64) {
-        (
-            self.x0 + (i as f64 + 0.5) * self.res,
-            self.y0 + (j as f64 + 0.5) * self.res,
+            ((x - g.x0) / g.res).floor() as i64,
+            ((y - g.y0) / g.res).floor() as i64,
         )
     }
 
     /// Whether (x, y) lies in the window.
     pub fn inside(&self, x: f64, y: f64) -> bool {
-        let (i, j) = self.cell(x, y);
-        i >= 0 && j >= 0 && (i as usize) < self.nx && (j as usize) < self.ny
+        self.grid.index(x, y).is_some()
     }
 
     /// The distance from (x, y) to the nearest obstacle's edge, to within half a cell's
     /// diagonal (capped; 0 outside the window).
     pub fn distance(&self, x: f64, y: f64) -> f64 {
-        if !self.inside(x, y) {
-            return 0.0;
-        }
-        let (i, j) = self.cell(x, y);
-        f64::from(self.dist[j as usize * self.nx + i as usize])
+        self.grid
+            .index(x, y)
+            .map_or(0.0, |k| f64::from(self.dist[k]))
     }
 
     /// How far a cell's distance may be off at a point in it, metres.
     fn slack(&self) -> f64 {
-        self.res * std::f64::consts::FRAC_1_SQRT_2
+        self.grid.res * std::f64::consts::FRAC_1_SQRT_2
     }
 
     /// The window's corners.
     pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
-        let hi = [
-            self.x0 + self.nx as f64 * self.res,
-            self.y0 + self.ny as f64 * self.res,
-        ];
-        ([self.x0, self.y0], hi)
+        ([self.grid.x0, self.grid.y0], self.grid.hi())
     }
 
     pub fn footprint(&self) -> &Footprint {
@@ -169,20 +153,21 @@ impl Field {
     pub fn clear(&self, pose: [f64; 3]) -> bool {
         let [x, y, theta] = pose;
         let f = &self.car;
-        let (c, s) = (theta.cos(), theta.sin());
+        let (s, c) = theta.sin_cos();
         let half = (f.front + f.rear) / 2.0;
         let mid = (f.front - f.rear) / 2.0;
         let slack = self.slack();
         let on_axis = |u: f64| (x + u * c, y + u * s);
         // Every covering disc clear: clear.
-        let rho = (half / COVER as f64).hypot(f.half_width) + f.margin;
         let covered = (0..COVER).all(|k| {
             let u = mid - half + half / COVER as f64 * (2 * k + 1) as f64;
             let (px, py) = on_axis(u);
-            self.inside(px, py) && self.distance(px, py) - slack >= rho
+            self.grid
+                .index(px, py)
+                .is_some_and(|k| f64::from(self.dist[k]) - slack >= self.cover)
         });
         if covered {
-            return self.corners_inside(pose);
+            return self.corners_inside(x, y, c, s);
         }
         // A disc of the half width inside the rectangle touched: not clear.
         let inner = f.half_width + f.margin;
@@ -195,13 +180,13 @@ impl Field {
         if touched {
             return false;
         }
-        self.corners_inside(pose) && self.exact(pose)
+        self.corners_inside(x, y, c, s) && self.exact(x, y, c, s)
     }
 
-    /// Whether the rectangle's corners lie in the window (beyond it nothing is known).
-    fn corners_inside(&self, [x, y, theta]: [f64; 3]) -> bool {
+    /// Whether the rectangle's corners lie in the window (beyond it nothing is known),
+    /// the car at (x, y) heading (cos `c`, sin `s`).
+    fn corners_inside(&self, x: f64, y: f64, c: f64, s: f64) -> bool {
         let f = &self.car;
-        let (c, s) = (theta.cos(), theta.sin());
         [
             (f.front, f.half_width),
             (f.front, -f.half_width),
@@ -212,8 +197,9 @@ impl Field {
         .all(|(u, v)| self.inside(x + u * c - v * s, y + u * s + v * c))
     }
 
-    /// The exact check, rectangle against each obstacle near it.
-    fn exact(&self, [x, y, theta]: [f64; 3]) -> bool {
+    /// The exact check, rectangle against each obstacle near it (compared squared: a
+    /// disc's radius plus the margin is never negative).
+    fn exact(&self, x: f64, y: f64, c: f64, s: f64) -> bool {
         let f = &self.car;
         let reach = f.front.max(f.rear).hypot(f.half_width) + f.margin + self.max_r;
         let (b0, b1) = (bucket(x - reach, y - reach), bucket(x + reach, y + reach));
@@ -224,7 +210,9 @@ impl Field {
                 };
                 for &id in ids {
                     let d = self.discs[id as usize];
-                    if f.distance(x, y, theta, d.x, d.y) <= d.r + f.margin {
+                    let (du, dv) = f.outside(c, s, d.x - x, d.y - y);
+                    let keep = d.r + f.margin;
+                    if du * du + dv * dv <= keep * keep {
                         return false;
                     }
                 }

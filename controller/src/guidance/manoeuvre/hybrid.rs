@@ -15,8 +15,9 @@
 use super::curves;
 use super::field::Field;
 use super::path::{Manoeuvre, PathPoint, arc};
+use crate::grid::Grid;
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 
 /// Step between the poses a path is sampled and checked at, metres.
 pub const SAMPLE: f64 = 0.1;
@@ -138,8 +139,11 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         forward: true,
         curvature: 0.0,
     }];
-    let mut best: HashMap<(i64, i64, i64), usize> = HashMap::new();
-    let mut closed: std::collections::HashSet<usize> = std::collections::HashSet::new();
+    let mut best = Kept::new(field, s);
+    let Some(slot) = best.slot(start) else {
+        return Err(Failure::StartBlocked);
+    };
+    best.set(slot, 0);
     let mut open = BinaryHeap::new();
     let mut seq = 0u64;
     open.push(Reverse((h0.to_bits(), seq, 0usize)));
@@ -147,10 +151,11 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     // The generated node nearest the goal by the holonomic way's length.
     let mut nearest = (h0, 0usize);
     while let Some(Reverse((_, _, id))) = open.pop() {
-        if !closed.insert(id) {
+        let node = nodes[id];
+        // A node since bettered in its cell is not expanded.
+        if best.slot(node.pose).and_then(|k| best.get(k)) != Some(id) {
             continue;
         }
-        let node = nodes[id];
         if at_goal(node.pose, goal) {
             let manoeuvre = finish(&nodes, id, Vec::new(), s.step);
             return Ok(Found {
@@ -173,8 +178,10 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         }
         for (pose, forward, curvature, step_cost) in successors(field, &node, s) {
             let g = node.g + step_cost;
-            let key = key(pose, s);
-            if best.get(&key).is_some_and(|&b| nodes[b].g <= g) {
+            let Some(slot) = best.slot(pose) else {
+                continue;
+            };
+            if best.get(slot).is_some_and(|b| nodes[b].g <= g) {
                 continue;
             }
             let h = heuristic(&holo, pose, goal, s);
@@ -193,7 +200,7 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
             if way < nearest.0 {
                 nearest = (way, child);
             }
-            best.insert(key, child);
+            best.set(slot, child);
             seq += 1;
             open.push(Reverse(((g + h).to_bits(), seq, child)));
         }
@@ -214,14 +221,40 @@ fn at_goal(pose: [f64; 3], goal: &Goal) -> bool {
         && super::super::frame::wrap(pose[2] - goal.pose[2]).abs() <= goal.tol_theta
 }
 
-fn key(pose: [f64; 3], s: &Settings) -> (i64, i64, i64) {
-    let turn = std::f64::consts::TAU;
-    let h = (pose[2].rem_euclid(turn) / turn * s.heading_bins as f64).floor() as i64;
-    (
-        (pose[0] / s.xy_res).floor() as i64,
-        (pose[1] / s.xy_res).floor() as i64,
-        h % s.heading_bins as i64,
-    )
+/// The node kept in each cell of position and heading (the best found there): a
+/// table over the field's window.
+struct Kept {
+    grid: Grid,
+    bins: usize,
+    /// Node id + 1 per cell; 0: none yet.
+    node: Vec<u32>,
+}
+
+impl Kept {
+    fn new(field: &Field, s: &Settings) -> Kept {
+        let (lo, hi) = field.bounds();
+        let grid = Grid::covering(lo, hi, s.xy_res);
+        Kept {
+            grid,
+            bins: s.heading_bins,
+            node: vec![0; grid.len() * s.heading_bins],
+        }
+    }
+
+    /// The cell of `pose`; None outside the window.
+    fn slot(&self, pose: [f64; 3]) -> Option<usize> {
+        let turn = std::f64::consts::TAU;
+        let h = (pose[2].rem_euclid(turn) / turn * self.bins as f64) as usize % self.bins;
+        self.grid.index(pose[0], pose[1]).map(|k| k * self.bins + h)
+    }
+
+    fn get(&self, slot: usize) -> Option<usize> {
+        self.node[slot].checked_sub(1).map(|id| id as usize)
+    }
+
+    fn set(&mut self, slot: usize, id: usize) {
+        self.node[slot] = id as u32 + 1;
+    }
 }
 
 fn heuristic(holo: &Holonomic, pose: [f64; 3], goal: &Goal, s: &Settings) -> f64 {
@@ -284,15 +317,9 @@ fn analytic(
         return None;
     }
     curves::curves(node.pose, goal.pose, s.turn_radius)
-        .into_iter()
         .take(ANALYTIC_CURVES)
-        .find_map(|c| {
-            let points = c.sample(node.pose, SAMPLE);
-            if !points.iter().all(|p| field.passable(p)) {
-                return None;
-            }
-            Some(points)
-        })
+        .find(|c| c.points(node.pose, SAMPLE).all(|p| field.passable(&p)))
+        .map(|c| c.sample(node.pose, SAMPLE))
 }
 
 /// The manoeuvre from the start to node `id` (each node one step of `step` metres from
@@ -329,42 +356,30 @@ fn finish(nodes: &[Node], id: usize, tail: Vec<PathPoint>, step: f64) -> Manoeuv
 /// from each cell to the goal's, through cells whose distance to the nearest obstacle
 /// lets the rear axle stand there (Dijkstra from the goal).
 struct Holonomic {
-    x0: f64,
-    y0: f64,
-    res: f64,
-    nx: usize,
-    ny: usize,
+    grid: Grid,
     cost: Vec<f64>,
 }
 
 impl Holonomic {
     fn new(field: &Field, goal: [f64; 3], res: f64) -> Holonomic {
         let (lo, hi) = field.bounds();
-        let nx = ((hi[0] - lo[0]) / res).ceil() as usize;
-        let ny = ((hi[1] - lo[1]) / res).ceil() as usize;
+        let grid = Grid::covering(lo, hi, res);
         let f = field.footprint();
         // The rear axle is at least this far from every obstacle, less the field's
         // error over a cell.
         let room = f.rear.min(f.half_width) + f.margin - res;
-        let passable: Vec<bool> = (0..nx * ny)
+        let passable: Vec<bool> = (0..grid.len())
             .map(|k| {
-                let (i, j) = (k % nx, k / nx);
-                let (x, y) = (
-                    lo[0] + (i as f64 + 0.5) * res,
-                    lo[1] + (j as f64 + 0.5) * res,
-                );
+                let (x, y) = grid.centre(k);
                 field.distance(x, y) >= room
             })
             .collect();
+        let (nx, ny) = (grid.nx, grid.ny);
         let mut h = Holonomic {
-            x0: lo[0],
-            y0: lo[1],
-            res,
-            nx,
-            ny,
-            cost: vec![f64::INFINITY; nx * ny],
+            grid,
+            cost: vec![f64::INFINITY; grid.len()],
         };
-        let Some(g) = h.index(goal[0], goal[1]) else {
+        let Some(g) = h.grid.index(goal[0], goal[1]) else {
             return h;
         };
         let mut open = BinaryHeap::new();
@@ -402,17 +417,10 @@ impl Holonomic {
         h
     }
 
-    fn index(&self, x: f64, y: f64) -> Option<usize> {
-        let i = ((x - self.x0) / self.res).floor();
-        let j = ((y - self.y0) / self.res).floor();
-        (i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny)
-            .then(|| j as usize * self.nx + i as usize)
-    }
-
     /// The way's length from (x, y), less a cell's diagonal (the cell's error).
     fn at(&self, x: f64, y: f64) -> f64 {
-        self.index(x, y).map_or(f64::INFINITY, |k| {
-            (self.cost[k] - self.res * std::f64::consts::SQRT_2).max(0.0)
+        self.grid.index(x, y).map_or(f64::INFINITY, |k| {
+            (self.cost[k] - self.grid.res * std::f64::consts::SQRT_2).max(0.0)
         })
     }
 }
