@@ -131,12 +131,10 @@ impl fmt::Display for FieldPath {
 /// reads, or a value in it makes no sense.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
-    #[error("{file}: {source}")]
-    Read {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The system's reason is in the message (not a source as well: a printer of
+    /// error chains would say it twice).
+    #[error("{file}: {cause}")]
+    Read { file: String, cause: std::io::Error },
     /// Syntax errors and unknown or mistyped fields (the TOML error names line and
     /// column).
     #[error("{file}: {message}")]
@@ -148,9 +146,9 @@ pub enum FileError {
 
 /// The text of the file at `path`.
 pub fn read_file(path: &std::path::Path) -> Result<String, FileError> {
-    std::fs::read_to_string(path).map_err(|source| FileError::Read {
+    std::fs::read_to_string(path).map_err(|cause| FileError::Read {
         file: path.display().to_string(),
-        source,
+        cause,
     })
 }
 
@@ -366,6 +364,15 @@ mod tests {
     use super::*;
 
     const TEXT: &str = "name = \"x\"\n\n[gps]\nrate_hz = 10\n\n[gps.rtk]\nhorizontal_sigma_m = -1\n\n[[obstacles]]\nkind = \"circle\"\nx = 1\n\n[[obstacles]]\nkind = \"circle\"\nradius = 0\n";
+
+    #[test]
+    fn a_file_that_cannot_be_read_is_named_with_the_reason_once() {
+        let e = read_file(std::path::Path::new("/nonexistent/scenario.toml")).unwrap_err();
+        let text = e.to_string();
+        assert!(text.starts_with("/nonexistent/scenario.toml: "), "{text}");
+        assert_eq!(text.matches("os error").count(), 1, "{text}");
+        assert!(std::error::Error::source(&e).is_none(), "{text}");
+    }
 
     #[test]
     fn paths_print_keys_and_indices() {
