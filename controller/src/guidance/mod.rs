@@ -179,27 +179,34 @@ const SEEN_TURN: f64 = 0.05;
 /// Step along a reversal at which its poses are checked against the seen space,
 /// metres.
 const SEEN_CHECK_STEP: f64 = 0.2;
-/// After a manoeuvre search that found nothing, none for this long, seconds.
+/// After a manoeuvre search that found nothing, none for this long at first, seconds.
 const MANOEUVRE_RETRY_S: f64 = 2.0;
 
-/// How many times `manoeuvre_expansions` the next manoeuvre search may take: each
-/// search that finds nothing gives the next [`SearchEffort::GROWTH`] times its effort,
-/// up to [`SearchEffort::MAX`] times the first, and one that finds a manoeuvre sets it
-/// back. A car standing before a tight place searches the same map again, deeper each
-/// time, instead of giving up where the first budget ran out (a bound in expansions,
-/// not time: SIL stays deterministic).
+/// What the next manoeuvre search may take, and when: each search that finds nothing
+/// gives the next [`SearchEffort::GROWTH`] times its effort (`manoeuvre_expansions`),
+/// up to [`SearchEffort::MAX`] times the first, after a wait that grows alike from
+/// [`MANOEUVRE_RETRY_S`] (2, 8, then 32 s); one that finds a manoeuvre sets both back.
+/// A car standing before a tight place searches the same map again, deeper each time,
+/// instead of giving up where the first budget ran out, and a car that stands for good
+/// does not search its unchanged map in full every 2 s. A bound in expansions, not
+/// time: SIL stays deterministic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct SearchEffort(u32);
+struct SearchEffort {
+    /// Searches that found nothing since the last that found a manoeuvre.
+    failures: u32,
+}
 
 impl SearchEffort {
-    const FIRST: SearchEffort = SearchEffort(1);
+    const FIRST: SearchEffort = SearchEffort { failures: 0 };
     const GROWTH: u32 = 4;
     const MAX: u32 = 16;
 
     /// The effort after a search that `failed` (found nothing) or `found` a manoeuvre.
     fn after(self, failed: bool, found: bool) -> SearchEffort {
         if failed {
-            SearchEffort((self.0 * Self::GROWTH).min(Self::MAX))
+            SearchEffort {
+                failures: self.failures + 1,
+            }
         } else if found {
             Self::FIRST
         } else {
@@ -207,9 +214,19 @@ impl SearchEffort {
         }
     }
 
+    /// `GROWTH` to the power `n`, at most `MAX`.
+    fn grown(n: u32) -> u32 {
+        Self::GROWTH.saturating_pow(n).min(Self::MAX)
+    }
+
+    /// How long after a search that found nothing the next may start, seconds.
+    fn retry_wait(self) -> f64 {
+        MANOEUVRE_RETRY_S * f64::from(Self::grown(self.failures.saturating_sub(1)))
+    }
+
     /// The expansions of a search with a first budget of `base`.
     fn expansions(self, base: u32) -> usize {
-        base as usize * self.0 as usize
+        base as usize * Self::grown(self.failures) as usize
     }
 }
 /// No manoeuvre is searched with a moving obstacle this near the car, metres.
@@ -280,7 +297,7 @@ pub struct Navigator {
     manoeuvres: u32,
     manoeuvre_best: f64,
     /// When a manoeuvre search last found nothing: none is searched again for
-    /// [`MANOEUVRE_RETRY_S`] (a car standing in a dead end would search at every
+    /// [`SearchEffort::retry_wait`] (a car standing in a dead end would search at every
     /// replanning).
     search_failed_at: Option<f64>,
     /// What the next manoeuvre search may take.
@@ -659,8 +676,8 @@ impl Navigator {
     /// The manoeuvre search from `pose` at progress `s` at `now` ([`manoeuvre`]), or
     /// the check of the manoeuvre being followed; none with a moving obstacle within
     /// [`MANOEUVRE_TRAFFIC_RANGE`] of the car (traffic is given way to, not
-    /// manoeuvred round), nor within [`MANOEUVRE_RETRY_S`] of a search that found
-    /// nothing, nor once `max_manoeuvres` are spent without progress.
+    /// manoeuvred round), nor within [`SearchEffort::retry_wait`] of a search that
+    /// found nothing, nor once `max_manoeuvres` are spent without progress.
     fn manoeuvre_request(
         &self,
         now: f64,
@@ -683,7 +700,7 @@ impl Navigator {
                 && (self.manoeuvres_spent()
                     || self
                         .search_failed_at
-                        .is_some_and(|t| now - t < MANOEUVRE_RETRY_S));
+                        .is_some_and(|t| now - t < self.search_effort.retry_wait()));
         if traffic || resting {
             return None;
         }
@@ -1299,14 +1316,17 @@ mod tests {
     use crate::perception::{PerceptionConfig, cover_segment};
 
     #[test]
-    fn each_search_that_finds_nothing_deepens_the_next_up_to_a_bound_and_a_find_resets_it() {
+    fn each_search_that_finds_nothing_deepens_and_delays_the_next_up_to_a_bound_and_a_find_resets_it()
+     {
         let mut e = SearchEffort::FIRST;
-        let mut budgets = Vec::new();
+        let (mut budgets, mut waits) = (Vec::new(), Vec::new());
         for _ in 0..4 {
             budgets.push(e.expansions(20_000));
             e = e.after(true, false);
+            waits.push(e.retry_wait());
         }
         assert_eq!(budgets, [20_000, 80_000, 320_000, 320_000]);
+        assert_eq!(waits, [2.0, 8.0, 32.0, 32.0]);
         // A kept manoeuvre (neither failed nor new) leaves the effort as it is.
         assert_eq!(e.after(false, false), e);
         assert_eq!(e.after(false, true), SearchEffort::FIRST);
