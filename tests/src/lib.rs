@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
+pub mod foreign;
+
 /// A vcan interface of the test's own, deleted on drop, so tests run in parallel.
 ///
 /// Creating it fails loudly (with the reason and what to do) when this kernel has no
@@ -276,6 +278,19 @@ pub fn replay_hil_recording(
         );
     }
     Ok(report)
+}
+
+/// A HIL `verdict` that passed its criteria: the goal reached, no collision.
+pub fn a_hil_run_that_passed(verdict: &serde_json::Value) -> anyhow::Result<()> {
+    use anyhow::ensure;
+    ensure!(
+        verdict["passed"] == true,
+        "failures: {}",
+        verdict["failures"]
+    );
+    ensure!(verdict["goal_reached"] == true && verdict["collision"] == false);
+    ensure!(verdict["mode"] == "hil");
+    Ok(())
 }
 
 /// Every frame on the bus passed the ECUs' E2E checks, both ways, by a HIL `verdict`'s

@@ -9,7 +9,9 @@
 use std::process::Command;
 
 use anyhow::{Context, Result, ensure};
-use ugv_e2e_tests::{TestVcan, every_frame_passed_the_e2e_checks, workspace_bin};
+use ugv_e2e_tests::{
+    TestVcan, a_hil_run_that_passed, every_frame_passed_the_e2e_checks, workspace_bin,
+};
 
 #[test]
 fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() -> Result<()> {
@@ -58,13 +60,7 @@ fn the_paper_scenario_reaches_its_goal_in_hil_with_the_real_controller_binary() 
         "ugv-sim exit {:?}; stderr:\n{stderr}",
         out.status
     );
-    ensure!(
-        verdict["passed"] == true,
-        "failures: {}",
-        verdict["failures"]
-    );
-    ensure!(verdict["goal_reached"] == true && verdict["collision"] == false);
-    ensure!(verdict["mode"] == "hil");
+    a_hil_run_that_passed(&verdict)?;
     // iceoryx2's start-up warning (no configuration file) is silenced in ugv-sim and in
     // the controller (whose stderr is ugv-sim's).
     ensure!(
