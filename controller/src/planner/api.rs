@@ -224,13 +224,16 @@ impl PlanProblem {
                 value: self.wheelbase,
             });
         }
-        // A car's, as `vehicle.wheelbase` of the configuration (1e300 is no vehicle).
-        crate::ranges::WHEELBASE
-            .check(&ugv_fields::FieldPath::of(&["wheelbase"]), self.wheelbase)
-            .map_err(|e| PlanError::OutOfRange {
-                field: e.path.to_string(),
-                message: e.message,
-            })?;
+        // A car's, as `vehicle.wheelbase` of the configuration (1e300 is no vehicle);
+        // the field's path only built for a value outside.
+        if !crate::ranges::WHEELBASE.contains(self.wheelbase) {
+            crate::ranges::WHEELBASE
+                .check(&ugv_fields::FieldPath::of(&["wheelbase"]), self.wheelbase)
+                .map_err(|e| PlanError::OutOfRange {
+                    field: e.path.to_string(),
+                    message: e.message,
+                })?;
+        }
         check_radius("vehicle_radius", self.vehicle_radius)?;
         check_angle("state.theta", self.state.theta, false)?;
         check_angle("goal.theta", self.goal.theta, false)?;
