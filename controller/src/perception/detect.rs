@@ -101,7 +101,7 @@ impl View {
     /// the field of view returned no nearer than the disc (less a slack).
     pub fn sees(&self, laser: &Pose2, x: f64, y: f64, r: f64) -> bool {
         let (dx, dy) = (x - laser.x, y - laser.y);
-        let d = dx.hypot(dy);
+        let d = (dx * dx + dy * dy).sqrt();
         if d.is_nan() || d - r > self.range_max {
             return false;
         }
@@ -131,7 +131,7 @@ impl View {
     /// behind something nearer, no echo, or beams that disagree).
     pub fn surface_at(&self, laser: &Pose2, p: [f64; 2], tolerance: f64) -> Seen {
         let (dx, dy) = (p[0] - laser.x, p[1] - laser.y);
-        let d = dx.hypot(dy);
+        let d = (dx * dx + dy * dy).sqrt();
         let last = self.ranges.len() as f64 - 1.0;
         if d.is_nan() || d > self.range_max || self.angle_increment == 0.0 || last < 0.0 {
             return Seen::Unknown;
@@ -156,12 +156,10 @@ impl View {
         else {
             return Seen::Unknown;
         };
-        let near =
-            |h: Option<[f64; 2]>| h.is_some_and(|h| (h[0] - p[0]).hypot(h[1] - p[1]) <= tolerance);
+        let near = |h: Option<[f64; 2]>| h.is_some_and(|h| distance(h, p) <= tolerance);
         let on_chord = match (h0, h1) {
             (Some(a), Some(b)) => {
-                (a[0] - b[0]).hypot(a[1] - b[1]) <= CHORD_MAX
-                    && distance_to_segment(p, a, b) <= tolerance
+                distance(a, b) <= CHORD_MAX && distance_to_segment(p, a, b) <= tolerance
             }
             _ => false,
         };
@@ -199,7 +197,15 @@ pub(super) fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 
     } else {
         0.0
     };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+    let (ex, ey) = (p[0] - a[0] - t * dx, p[1] - a[1] - t * dy);
+    (ex * ex + ey * ey).sqrt()
+}
+
+/// Distance between two points: the square root of the squared sum (no `hypot`:
+/// world coordinates in metres are far from its overflow and underflow guards).
+pub(super) fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// Detects the obstacles of one scan (no tracking): transformation, clustering and
@@ -356,10 +362,7 @@ fn blob(
     } else {
         g
     };
-    let radius = pts
-        .iter()
-        .map(|p| (p[0] - centre[0]).hypot(p[1] - centre[1]))
-        .fold(r0, f64::max);
+    let radius = pts.iter().map(|p| distance(*p, centre)).fold(r0, f64::max);
     let s2 = (0.5 * radius).powi(2);
     Some(CircleMeasurement {
         centre,

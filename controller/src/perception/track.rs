@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::config::PerceptionConfig;
 use super::detect::{
     CircleMeasurement, Detections, ObstacleKind, Seen, SegmentMeasurement, View, cover_segment,
-    detect, distance_to_segment,
+    detect, distance, distance_to_segment,
 };
 use super::frame::{Pose2, Scan, ScanPoint};
 use super::{PerceptionError, check_finite};
@@ -696,6 +696,43 @@ fn wall_cost(
     (gap <= cfg.wall_gap_gate).then_some(offset + gap)
 }
 
+/// The (track, measurement, distance) pairs within the gate, in track then measurement
+/// order. A pair gates only within `gate_max_distance` of each other, so measurements
+/// are sorted by x and each track looks only at those whose x is within that distance
+/// of its own (widened by a relative 1e-9 against rounding): the same pairs as trying
+/// every track with every measurement, at the cost of the pairs that are near.
+fn gate(
+    tracks: &[PointTrack],
+    circles: &[CircleMeasurement],
+    cfg: &PerceptionConfig,
+) -> Vec<(usize, usize, f64)> {
+    // A non-finite centre is never within the gate.
+    let mut by_x: Vec<(f64, usize)> = circles
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.centre[0].is_finite() && m.centre[1].is_finite())
+        .map(|(i, m)| (m.centre[0], i))
+        .collect();
+    by_x.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let reach = cfg.gate_max_distance * (1.0 + 1e-9) + 1e-12;
+    let mut candidates = Vec::new();
+    let mut near = Vec::new();
+    for (ti, t) in tracks.iter().enumerate() {
+        let x = t.state[0];
+        let lo = by_x.partition_point(|m| m.0 < x - reach);
+        let hi = by_x.partition_point(|m| m.0 <= x + reach);
+        near.clear();
+        near.extend(by_x.get(lo..hi).unwrap_or_default().iter().map(|m| m.1));
+        near.sort_unstable();
+        for &mi in &near {
+            if let Some(d) = circles.get(mi).and_then(|m| t.gated_distance(m, cfg)) {
+                candidates.push((ti, mi, d));
+            }
+        }
+    }
+    candidates
+}
+
 /// Greedy global nearest neighbour: pairs (track, measurement) by increasing cost.
 fn assign(
     mut candidates: Vec<(usize, usize, f64)>,
@@ -793,14 +830,7 @@ impl Perception {
         for t in &mut self.tracks {
             t.predict(dt, cfg);
         }
-        let mut candidates = Vec::new();
-        for (ti, t) in self.tracks.iter().enumerate() {
-            for (mi, m) in detections.circles.iter().enumerate() {
-                if let Some(d) = t.gated_distance(m, cfg) {
-                    candidates.push((ti, mi, d));
-                }
-            }
-        }
+        let candidates = gate(&self.tracks, &detections.circles, cfg);
         let track_of = assign(candidates, self.tracks.len(), detections.circles.len());
         let mut updated = vec![false; self.tracks.len()];
         for (m, t) in detections.circles.iter().zip(&track_of) {
@@ -821,7 +851,7 @@ impl Perception {
         // remembered, not missed, while within `memory_radius`.
         let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
         let out_of_sight_nearby = |x: f64, y: f64, r: f64| {
-            (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius && !sees(x, y, r)
+            distance([x, y], [pose.x, pose.y]) - r <= cfg.memory_radius && !sees(x, y, r)
         };
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
             life.memorable(cfg) && !moving && out_of_sight_nearby(x, y, r)
@@ -852,7 +882,7 @@ impl Perception {
         self.tracks.retain(|t| {
             !t.life.dead(cfg)
                 && (cfg.memory_radius <= 0.0
-                    || (t.state[0] - pose.x).hypot(t.state[1] - pose.y) - t.radius
+                    || distance([t.state[0], t.state[1]], [pose.x, pose.y]) - t.radius
                         <= cfg.memory_radius
                     || sees(t.state[0], t.state[1], t.radius))
         });
@@ -862,12 +892,13 @@ impl Perception {
         for (m, t) in detections.circles.iter().zip(&track_of) {
             // A measurement centred inside a confirmed track's circle is a fragment of
             // that object (a partial view, a cluster split by dropouts), not a new one.
-            let fragment = self.tracks.iter().any(|t| {
-                t.life.confirmed
-                    && (t.state[0] - m.centre[0]).hypot(t.state[1] - m.centre[1])
-                        < t.radius.max(m.radius)
-            });
-            if t.is_none() && !fragment {
+            let fragment = || {
+                self.tracks.iter().any(|t| {
+                    t.life.confirmed
+                        && distance([t.state[0], t.state[1]], m.centre) < t.radius.max(m.radius)
+                })
+            };
+            if t.is_none() && !fragment() {
                 self.tracks
                     .push(PointTrack::new(self.next_id, m, stamp, cfg));
                 self.next_id += 1;
@@ -1108,7 +1139,7 @@ impl Within<'_> {
     /// Whether a disc at (x, y) of radius `r` comes within `radius` of the pose (or
     /// nothing is filtered).
     fn radius(&self, x: f64, y: f64, r: f64, radius: f64) -> bool {
-        !self.filtered || (x - self.pose.x).hypot(y - self.pose.y) - r <= radius
+        !self.filtered || distance([x, y], [self.pose.x, self.pose.y]) - r <= radius
     }
 }
 
