@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use super::config::PerceptionConfig;
 use super::detect::{
-    CircleMeasurement, Detections, ObstacleKind, Seen, SegmentMeasurement, View, cover_segment,
-    detect, distance, distance_to_segment,
+    CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
+    cover_segment, detect, distance, distance_to_segment,
 };
 use super::frame::{Pose2, Scan, ScanPoint};
 use super::{PerceptionError, check_finite};
@@ -373,10 +373,13 @@ const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
 /// never a part where the earlier beams passed. An object moving at more than
 /// [`STILL_SPEED`] leaves its surface: crossing, its leading side stands where the
 /// beams passed; coming or going, most of its hits are off the earlier surface.
-fn cluster_still(points: &[ScanPoint], past: &PastView) -> bool {
+fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]) -> bool {
     let (mut surface, mut free) = (0usize, 0usize);
     for p in points {
-        match past.view.surface_at(&past.laser, p.world, STILL_TOLERANCE) {
+        match past
+            .view
+            .surface_at_cached(&past.laser, p.world, STILL_TOLERANCE, hits)
+        {
             Seen::Surface => surface += 1,
             Seen::Free => free += 1,
             Seen::Unknown => {}
@@ -1003,6 +1006,8 @@ impl Perception {
             .iter()
             .rev()
             .find(|v| stamp - v.stamp >= STILL_BASELINE_S - 1e-9);
+        // The baseline's beam hits, each computed once for all the clusters.
+        let mut hits = baseline.map_or_else(Vec::new, |past| past.view.hit_cache());
         let still = detections
             .clusters
             .iter()
@@ -1011,7 +1016,7 @@ impl Perception {
                     detections
                         .points
                         .get(c.clone())
-                        .is_some_and(|points| cluster_still(points, past))
+                        .is_some_and(|points| cluster_still(points, past, &mut hits))
                 })
             })
             .collect();
