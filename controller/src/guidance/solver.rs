@@ -754,6 +754,7 @@ fn solve_one(
     let options = PlanOptions {
         sampling: GUIDANCE_SAMPLING,
         skip_clearance: true,
+        stop_when_infeasible: true,
     };
     let step = planner::plan_with(problem, &options).map_err(ReplanError::Planner)?;
     let projected = step.result.projected_to_boundary;

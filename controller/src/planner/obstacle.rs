@@ -154,6 +154,13 @@ fn overlaps_at(traj: &Trajectory, obstacle: &Obstacle, r: f64, t: f64) -> bool {
     (x - ox).hypot(y - oy) < r
 }
 
+/// Whether the vehicle overlaps the obstacle at the start or at the goal of the step
+/// (then [`obstacle_constraint`] forbids every a6).
+pub fn ends_collide(traj: &Trajectory, obstacle: &Obstacle, vehicle_radius: f64) -> bool {
+    let r = obstacle.radius + vehicle_radius;
+    overlaps_at(traj, obstacle, r, traj.t_k()) || overlaps_at(traj, obstacle, r, traj.t_f())
+}
+
 /// The a6 values an obstacle forbids during the step (the union over its collision
 /// window, see the module docs). `traj`'s own a6 is irrelevant.
 pub fn obstacle_constraint(
