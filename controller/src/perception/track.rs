@@ -701,9 +701,9 @@ fn wall_cost(
 
 /// The (track, measurement, distance) pairs within the gate, in track then measurement
 /// order. A pair gates only within `gate_max_distance` of each other, so measurements
-/// are sorted by x and each track looks only at those whose x is within that distance
-/// of its own (widened by a relative 1e-9 against rounding): the same pairs as trying
-/// every track with every measurement, at the cost of the pairs that are near.
+/// are sorted by x and each track looks only at those whose x, then y, is within that
+/// distance of its own (widened by a relative 1e-9 against rounding): the same pairs as
+/// trying every track with every measurement, at the cost of the pairs that are near.
 fn gate(
     tracks: &[PointTrack],
     circles: &[CircleMeasurement],
@@ -728,7 +728,14 @@ fn gate(
         near.extend(by_x.get(lo..hi).unwrap_or_default().iter().map(|m| m.1));
         near.sort_unstable();
         for &mi in &near {
-            if let Some(d) = circles.get(mi).and_then(|m| t.gated_distance(m, cfg)) {
+            let Some(m) = circles.get(mi) else {
+                continue;
+            };
+            // Out of reach in y as well: no innovation to compute.
+            if (m.centre[1] - t.state[1]).abs() > reach {
+                continue;
+            }
+            if let Some(d) = t.gated_distance(m, cfg) {
                 candidates.push((ti, mi, d));
             }
         }
@@ -1275,6 +1282,49 @@ fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gating_by_position_finds_the_pairs_all_against_all_does() {
+        let cfg = PerceptionConfig::default();
+        let circle = |x: f64, y: f64| CircleMeasurement {
+            centre: [x, y],
+            radius: 0.2,
+            centre_covariance: [[0.01, 0.0], [0.0, 0.01]],
+            radius_variance: 0.01,
+            kind: ObstacleKind::Post,
+            rms: 0.01,
+            points: 8,
+            cluster: 0,
+        };
+        // A field of posts 0.9-2.5 m apart, tracks a little off some of them, and
+        // measurements that coincide in x or y.
+        let at = |i: u32| {
+            let f = f64::from(i);
+            ((f * 0.37).sin() * 12.0 + f * 0.05, (f * 0.61).cos() * 9.0)
+        };
+        let circles: Vec<CircleMeasurement> = (0..120)
+            .map(at)
+            .chain([(3.0, 1.0), (3.0, 1.5), (3.5, 1.0)])
+            .map(|(x, y)| circle(x, y))
+            .collect();
+        let tracks: Vec<PointTrack> = (0..90)
+            .map(|i| {
+                let (x, y) = at(i * 4 / 3);
+                let m = circle(x + 0.4 * (f64::from(i)).sin(), y + 0.3);
+                PointTrack::new(u64::from(i), &m, 0.0, &cfg)
+            })
+            .collect();
+        let mut all = Vec::new();
+        for (ti, t) in tracks.iter().enumerate() {
+            for (mi, m) in circles.iter().enumerate() {
+                if let Some(d) = t.gated_distance(m, &cfg) {
+                    all.push((ti, mi, d));
+                }
+            }
+        }
+        assert!(all.len() > 90);
+        assert_eq!(gate(&tracks, &circles, &cfg), all);
+    }
 
     #[test]
     fn m_of_n_birth_and_k_miss_deletion() {
