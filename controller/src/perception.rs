@@ -143,8 +143,8 @@ mod track;
 pub use cluster::cluster_points;
 pub use config::PerceptionConfig;
 pub use detect::{
-    CircleMeasurement, Detections, ObstacleKind, Seen, SegmentMeasurement, View, cover_segment,
-    detect,
+    CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
+    cover_segment, detect,
 };
 pub use fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
 pub use frame::{Beam, Pose2, Scan, ScanPoint, scan_points};

@@ -754,6 +754,7 @@ fn solve_one(
     let options = PlanOptions {
         sampling: GUIDANCE_SAMPLING,
         skip_clearance: true,
+        stop_when_infeasible: true,
     };
     let step = planner::plan_with(problem, &options).map_err(ReplanError::Planner)?;
     let projected = step.result.projected_to_boundary;
@@ -773,18 +774,24 @@ fn solve_one(
     }
     let line = planner::ReferenceLine::new(0.0, 0.0, problem.goal.x, 0.0)
         .map_err(ReplanError::ReferenceLine)?;
+    // The problem was validated once, by the planner: each candidate is its path with
+    // another a6 (the same as `problem.trajectory(a6)` for a finite a6, and the
+    // candidates are finite).
+    let Some(base) = step.trajectory.or_else(|| problem.trajectory(0.0).ok()) else {
+        return Ok(None);
+    };
     // Cheapest first (the cost is a 7-point quadrature); the steering and footprint
     // checks, sampled along the path, only until one passes.
     let mut paths: Vec<(f64, f64, Trajectory)> =
         candidates(step.result.a6_unconstrained, &step.result.feasible_set)
             .into_iter()
-            .filter_map(|a6| problem.trajectory(a6).ok().map(|t| (a6, t)))
+            .map(|a6| (a6, base.with_a6(a6)))
             .map(|(a6, t)| (t.path().reference_cost(&line), a6, t))
             .collect();
     paths.sort_by(|a, b| a.0.total_cmp(&b.0));
     Ok(paths
         .into_iter()
-        .find(|(_, _, t)| max_steer(t) <= steer_limit && clear(t))
+        .find(|(_, _, t)| steer_within(t, steer_limit) && clear(t))
         .map(|(_, a6, trajectory)| Chosen {
             trajectory,
             a6,
@@ -842,10 +849,42 @@ fn record(
 /// angle at the largest |curvature| of 201 samples.
 fn max_steer(t: &Trajectory) -> f64 {
     let p = t.path();
-    let kappa = (0..=200)
-        .map(|j| p.curvature(p.x_k() + p.span() * f64::from(j) / 200.0).abs())
+    let kappa = (0..=STEER_SAMPLES)
+        .map(|j| steer_sample(p, j))
         .fold(0.0, f64::max);
     (p.wheelbase() * kappa).atan()
+}
+
+/// Intervals of the samples [`max_steer`] takes along a path.
+const STEER_SAMPLES: u32 = 200;
+
+/// |curvature| at sample `j` of [`max_steer`].
+fn steer_sample(p: &planner::PolynomialPath, j: u32) -> f64 {
+    p.curvature(p.x_k() + p.span() * f64::from(j) / f64::from(STEER_SAMPLES))
+        .abs()
+}
+
+/// `max_steer(t) <= limit`, stopping at the first sample whose curvature is over the
+/// limit's by more than rounding: above `tan(limit) / l (1 + 1e-9)` the angle
+/// `atan(l kappa)` is over `limit` whatever the rounding, so the answer is the same as
+/// the full maximum's; up to it, the maximum decides exactly as [`max_steer`] does.
+fn steer_within(t: &Trajectory, limit: f64) -> bool {
+    let p = t.path();
+    let l = p.wheelbase();
+    let over = if limit > 0.0 && limit < 1.5 {
+        limit.tan() / l * (1.0 + 1e-9)
+    } else {
+        f64::INFINITY
+    };
+    let mut kappa = 0.0_f64;
+    for j in 0..=STEER_SAMPLES {
+        let k = steer_sample(p, j);
+        if k > over {
+            return false;
+        }
+        kappa = kappa.max(k);
+    }
+    (l * kappa).atan() <= limit
 }
 
 /// a6 values to try inside the feasible set: its finite boundaries, the unconstrained

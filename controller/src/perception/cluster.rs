@@ -58,8 +58,8 @@ fn joins(
         return false;
     }
     let threshold = a.range.min(b.range) * dphi.sin() / (lambda - dphi).sin() + noise;
-    let d = (a.laser[0] - b.laser[0]).hypot(a.laser[1] - b.laser[1]);
-    d <= threshold
+    let (dx, dy) = (a.laser[0] - b.laser[0], a.laser[1] - b.laser[1]);
+    (dx * dx + dy * dy).sqrt() <= threshold
 }
 
 #[cfg(test)]

@@ -101,7 +101,7 @@ impl View {
     /// the field of view returned no nearer than the disc (less a slack).
     pub fn sees(&self, laser: &Pose2, x: f64, y: f64, r: f64) -> bool {
         let (dx, dy) = (x - laser.x, y - laser.y);
-        let d = dx.hypot(dy);
+        let d = (dx * dx + dy * dy).sqrt();
         if d.is_nan() || d - r > self.range_max {
             return false;
         }
@@ -130,8 +130,54 @@ impl View {
     /// the range), or nothing to tell (out of the field of view or the range, hidden
     /// behind something nearer, no echo, or beams that disagree).
     pub fn surface_at(&self, laser: &Pose2, p: [f64; 2], tolerance: f64) -> Seen {
+        self.surface_via(laser, p, tolerance, |k| self.hit(laser, k))
+    }
+
+    /// [`View::surface_at`] for many points of one scan: each beam's hit is computed
+    /// once (its `sin` and `cos`) and kept in `hits` (one slot per beam, `None` until
+    /// needed; [`View::hit_cache`] makes it), the same values `surface_at` computes
+    /// each time.
+    pub fn surface_at_cached(
+        &self,
+        laser: &Pose2,
+        p: [f64; 2],
+        tolerance: f64,
+        hits: &mut [Option<Hit>],
+    ) -> Seen {
+        self.surface_via(laser, p, tolerance, |k| match hits.get_mut(k) {
+            Some(Some(h)) => *h,
+            Some(slot) => *slot.insert(self.hit(laser, k)),
+            None => self.hit(laser, k),
+        })
+    }
+
+    /// An empty cache of beam hits for [`View::surface_at_cached`].
+    pub fn hit_cache(&self) -> Vec<Option<Hit>> {
+        vec![None; self.ranges.len()]
+    }
+
+    /// Beam `k`'s hit in the world frame, or None without a return; the range with
+    /// it. None for a beam without an echo (or none in the scan).
+    fn hit(&self, laser: &Pose2, k: usize) -> Hit {
+        let range = f64::from(*self.ranges.get(k)?);
+        if range.is_nan() {
+            return None;
+        }
+        let a = laser.yaw + self.angle_min + k as f64 * self.angle_increment;
+        let point = (range <= self.range_max)
+            .then(|| [laser.x + range * a.cos(), laser.y + range * a.sin()]);
+        Some((point, range))
+    }
+
+    fn surface_via(
+        &self,
+        laser: &Pose2,
+        p: [f64; 2],
+        tolerance: f64,
+        mut hit: impl FnMut(usize) -> Hit,
+    ) -> Seen {
         let (dx, dy) = (p[0] - laser.x, p[1] - laser.y);
-        let d = dx.hypot(dy);
+        let d = (dx * dx + dy * dy).sqrt();
         let last = self.ranges.len() as f64 - 1.0;
         if d.is_nan() || d > self.range_max || self.angle_increment == 0.0 || last < 0.0 {
             return Seen::Unknown;
@@ -141,27 +187,14 @@ impl View {
         if !(0.0..=last).contains(&k) {
             return Seen::Unknown;
         }
-        // The beam's hit in the world frame, or None without a return; the range with it.
-        let hit = |k: usize| -> Option<(Option<[f64; 2]>, f64)> {
-            let range = f64::from(*self.ranges.get(k)?);
-            if range.is_nan() {
-                return None;
-            }
-            let a = laser.yaw + self.angle_min + k as f64 * self.angle_increment;
-            let point = (range <= self.range_max)
-                .then(|| [laser.x + range * a.cos(), laser.y + range * a.sin()]);
-            Some((point, range))
-        };
         let (Some((h0, r0)), Some((h1, r1))) = (hit(k.floor() as usize), hit(k.ceil() as usize))
         else {
             return Seen::Unknown;
         };
-        let near =
-            |h: Option<[f64; 2]>| h.is_some_and(|h| (h[0] - p[0]).hypot(h[1] - p[1]) <= tolerance);
+        let near = |h: Option<[f64; 2]>| h.is_some_and(|h| distance(h, p) <= tolerance);
         let on_chord = match (h0, h1) {
             (Some(a), Some(b)) => {
-                (a[0] - b[0]).hypot(a[1] - b[1]) <= CHORD_MAX
-                    && distance_to_segment(p, a, b) <= tolerance
+                distance(a, b) <= CHORD_MAX && distance_to_segment(p, a, b) <= tolerance
             }
             _ => false,
         };
@@ -174,6 +207,10 @@ impl View {
         }
     }
 }
+
+/// One beam of a [`View`] in the world frame: its hit point (None: no return within
+/// the range) and its range; None for a beam without an echo.
+pub type Hit = Option<(Option<[f64; 2]>, f64)>;
 
 /// What an earlier scan saw at a point ([`View::surface_at`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -199,7 +236,15 @@ pub(super) fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 
     } else {
         0.0
     };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+    let (ex, ey) = (p[0] - a[0] - t * dx, p[1] - a[1] - t * dy);
+    (ex * ex + ey * ey).sqrt()
+}
+
+/// Distance between two points: the square root of the squared sum (no `hypot`:
+/// world coordinates in metres are far from its overflow and underflow guards).
+pub(super) fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// Detects the obstacles of one scan (no tracking): transformation, clustering and
@@ -246,7 +291,7 @@ fn classify(
     segments: &mut Vec<SegmentMeasurement>,
 ) {
     let n = pts.len();
-    if n >= cfg.circle_min_points {
+    if n >= cfg.circle_min_points && !too_long_for_a_post(pts, cfg) {
         let line = fit_line(pts);
         if let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
             && is_post(&c, line.as_ref(), pts, origin, cfg)
@@ -282,6 +327,42 @@ fn classify(
     } else {
         circles.extend(blob(pts, origin, cluster, cfg));
     }
+}
+
+/// Outliers' residual in [`too_long_for_a_post`], metres.
+const POST_OUTLIER: f64 = 1.0;
+
+/// Whether no circle fit of `pts` can pass [`is_post`]'s radius and RMS tests (radius
+/// at most `circle_radius_max` = R, RMS at most `circle_rms_max` = rho), so the fit
+/// need not be made (a hedge or a wall seen as one cluster). For such a circle, fewer
+/// than m = n rho^2 / d^2 points have a residual over d = [`POST_OUTLIER`] (their
+/// squares alone would exceed the n rho^2 the RMS allows), so any m of the points hold
+/// one with a smaller residual, within R + d of the centre. Two such groups (the
+/// first, middle and last m points of the cluster) farther apart than 2 (R + d) at
+/// their nearest therefore rule every passing circle out: [`classify`] then goes on as
+/// it would after a fit that failed [`is_post`]. Margins of 1e-9 cover the rounding.
+fn too_long_for_a_post(pts: &[[f64; 2]], cfg: &PerceptionConfig) -> bool {
+    let (radius, rms) = (cfg.circle_radius_max, cfg.circle_rms_max);
+    if !(radius.is_finite() && rms.is_finite()) {
+        return false;
+    }
+    let n = pts.len();
+    let outliers = n as f64 * rms * rms / (POST_OUTLIER * POST_OUTLIER) * (1.0 + 1e-9);
+    let m = outliers.floor() as usize + 1;
+    if 3 * m > n {
+        return false;
+    }
+    let apart = 2.0 * (radius + POST_OUTLIER) * (1.0 + 1e-9);
+    let mid = (n - m) / 2;
+    let (Some(first), Some(middle), Some(last)) =
+        (pts.get(..m), pts.get(mid..mid + m), pts.get(n - m..))
+    else {
+        return false;
+    };
+    let far = |a: &[[f64; 2]], b: &[[f64; 2]]| {
+        a.iter().all(|p| b.iter().all(|q| distance(*p, *q) > apart))
+    };
+    far(first, middle) || far(first, last) || far(middle, last)
 }
 
 fn is_post(
@@ -356,10 +437,7 @@ fn blob(
     } else {
         g
     };
-    let radius = pts
-        .iter()
-        .map(|p| (p[0] - centre[0]).hypot(p[1] - centre[1]))
-        .fold(r0, f64::max);
+    let radius = pts.iter().map(|p| distance(*p, centre)).fold(r0, f64::max);
     let s2 = (0.5 * radius).powi(2);
     Some(CircleMeasurement {
         centre,
@@ -456,6 +534,55 @@ mod tests {
         assert_eq!(at(-9.5, 8.0), Seen::Free, "where nothing returned");
         assert_eq!(at(30.0, 3.0), Seen::Unknown, "out of the field of view");
         assert_eq!(at(0.0, 30.0), Seen::Unknown, "beyond the range");
+        // The cached beam hits give the same answers, in any order of the points.
+        let mut hits = view.hit_cache();
+        for i in (0..400).rev() {
+            let (deg, x) = (-12.0 + 0.06 * f64::from(i), 4.0 + 0.006 * f64::from(i));
+            let p = [x, 2.0 + (x - 1.0) * deg.to_radians().tan()];
+            assert_eq!(
+                view.surface_at_cached(&laser, p, 0.06, &mut hits),
+                view.surface_at(&laser, p, 0.06),
+                "{p:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_cluster_too_long_for_a_post_has_no_circle_fit_that_passes() {
+        let cfg = PerceptionConfig::default();
+        let mut skipped = 0;
+        // Arcs of radius 2-40 m over 0.3-3 rad, and near-straight runs, with noise.
+        for (k, radius) in [2.0, 4.0, 5.0, 6.0, 8.0, 12.0, 40.0]
+            .into_iter()
+            .enumerate()
+        {
+            for span in [0.3, 1.0, 2.0, 3.0] {
+                let pts: Vec<[f64; 2]> = (0..300)
+                    .map(|i| {
+                        let t = span * f64::from(i) / 299.0;
+                        let noise = 0.02 * (f64::from(i) * 1.7 + k as f64).sin();
+                        let r = radius + noise;
+                        [10.0 + r * t.cos(), 3.0 + r * t.sin()]
+                    })
+                    .collect();
+                if too_long_for_a_post(&pts, &cfg) {
+                    skipped += 1;
+                    let passes = fit_circle(&pts, cfg.range_noise_sigma).is_some_and(|c| {
+                        c.radius <= cfg.circle_radius_max && c.rms <= cfg.circle_rms_max
+                    });
+                    assert!(!passes, "radius {radius}, span {span}");
+                }
+            }
+        }
+        assert!(skipped > 0);
+        // A post's arc is never ruled out.
+        let post: Vec<[f64; 2]> = (0..40)
+            .map(|i| {
+                let t = 3.0 + 0.02 * f64::from(i);
+                [5.0 + 0.3 * t.cos(), 0.3 * t.sin()]
+            })
+            .collect();
+        assert!(!too_long_for_a_post(&post, &cfg));
     }
 
     #[test]

@@ -27,27 +27,25 @@ const MAX_ITERATIONS: usize = 50;
 /// characteristic polynomial) as the start, then Levenberg-Marquardt on the geometric
 /// residuals. `noise_sigma` floors the residual standard deviation in the covariance.
 /// None with fewer than 3 points, collinear points or a non-finite result.
+///
+/// Each point's distance to the centre is taken once per trial (a `sqrt` of the squared
+/// sum, not `hypot`: the coordinates are metres, far from overflow): the cost of a trial
+/// and, once it is accepted, the normal equations of the next step (and the covariance
+/// at the end) come from the same distances.
 pub fn fit_circle(points: &[[f64; 2]], noise_sigma: f64) -> Option<CircleFit> {
     let n = points.len();
     if n < 3 {
         return None;
     }
     let (mut a, mut b, mut r) = taubin(points)?;
-    let cost = |a: f64, b: f64, r: f64| -> f64 {
-        points
-            .iter()
-            .map(|p| {
-                let e = (p[0] - a).hypot(p[1] - b) - r;
-                e * e
-            })
-            .sum()
-    };
-    let mut current = cost(a, b, r);
+    let mut dist = vec![0.0; n];
+    let mut trial = vec![0.0; n];
+    let mut current = cost(points, a, b, r, &mut dist);
+    let (mut jtj, mut jtr) = normal_equations(points, a, b, r, &dist);
     let mut lambda = 1e-3;
     let mut iterations = 0;
     for _ in 0..MAX_ITERATIONS {
         iterations += 1;
-        let (jtj, jtr) = normal_equations(points, a, b, r);
         let mut accepted = false;
         let mut step_norm = 0.0;
         while lambda < 1e12 {
@@ -60,12 +58,14 @@ pub fn fit_circle(points: &[[f64; 2]], noise_sigma: f64) -> Option<CircleFit> {
                 continue;
             };
             let (na, nb, nr) = (a + delta[0], b + delta[1], r + delta[2]);
-            let c = cost(na, nb, nr);
+            let c = cost(points, na, nb, nr, &mut trial);
             if c.is_finite() && c <= current {
                 a = na;
                 b = nb;
                 r = nr;
                 current = c;
+                std::mem::swap(&mut dist, &mut trial);
+                (jtj, jtr) = normal_equations(points, a, b, r, &dist);
                 lambda = (lambda * 0.1).max(1e-12);
                 accepted = true;
                 step_norm = delta.norm();
@@ -83,7 +83,6 @@ pub fn fit_circle(points: &[[f64; 2]], noise_sigma: f64) -> Option<CircleFit> {
     let rms = (current / n as f64).sqrt();
     let dof = n.saturating_sub(3).max(1) as f64;
     let s2 = (current / dof).max(noise_sigma * noise_sigma);
-    let (jtj, _) = normal_equations(points, a, b, r);
     let inv = jtj.try_inverse()?;
     let mut covariance = [[0.0; 3]; 3];
     for (i, row) in covariance.iter_mut().enumerate() {
@@ -100,14 +99,33 @@ pub fn fit_circle(points: &[[f64; 2]], noise_sigma: f64) -> Option<CircleFit> {
     })
 }
 
-/// J'J and J'e of the geometric residuals e_i = |p_i - c| - r over (a, b, r).
-fn normal_equations(points: &[[f64; 2]], a: f64, b: f64, r: f64) -> (Matrix3<f64>, Vector3<f64>) {
+/// Sum of the squared geometric residuals |p_i - c| - r, the distances |p_i - c| left
+/// in `dist`.
+fn cost(points: &[[f64; 2]], a: f64, b: f64, r: f64, dist: &mut [f64]) -> f64 {
+    let mut sum = 0.0;
+    for (p, d) in points.iter().zip(dist.iter_mut()) {
+        let (dx, dy) = (p[0] - a, p[1] - b);
+        *d = (dx * dx + dy * dy).sqrt();
+        let e = *d - r;
+        sum += e * e;
+    }
+    sum
+}
+
+/// J'J and J'e of the geometric residuals e_i = |p_i - c| - r over (a, b, r), with
+/// the distances |p_i - c| of [`cost`] at the same (a, b, r).
+fn normal_equations(
+    points: &[[f64; 2]],
+    a: f64,
+    b: f64,
+    r: f64,
+    dist: &[f64],
+) -> (Matrix3<f64>, Vector3<f64>) {
     let mut jtj = Matrix3::zeros();
     let mut jtr = Vector3::zeros();
-    for p in points {
+    for (p, &d) in points.iter().zip(dist) {
         let dx = p[0] - a;
         let dy = p[1] - b;
-        let d = dx.hypot(dy);
         let j = if d > 0.0 {
             Vector3::new(-dx / d, -dy / d, -1.0)
         } else {

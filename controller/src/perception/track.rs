@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use super::config::PerceptionConfig;
 use super::detect::{
-    CircleMeasurement, Detections, ObstacleKind, Seen, SegmentMeasurement, View, cover_segment,
-    detect, distance_to_segment,
+    CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
+    cover_segment, detect, distance, distance_to_segment,
 };
 use super::frame::{Pose2, Scan, ScanPoint};
 use super::{PerceptionError, check_finite};
@@ -373,10 +373,13 @@ const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
 /// never a part where the earlier beams passed. An object moving at more than
 /// [`STILL_SPEED`] leaves its surface: crossing, its leading side stands where the
 /// beams passed; coming or going, most of its hits are off the earlier surface.
-fn cluster_still(points: &[ScanPoint], past: &PastView) -> bool {
+fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]) -> bool {
     let (mut surface, mut free) = (0usize, 0usize);
     for p in points {
-        match past.view.surface_at(&past.laser, p.world, STILL_TOLERANCE) {
+        match past
+            .view
+            .surface_at_cached(&past.laser, p.world, STILL_TOLERANCE, hits)
+        {
             Seen::Surface => surface += 1,
             Seen::Free => free += 1,
             Seen::Unknown => {}
@@ -696,6 +699,50 @@ fn wall_cost(
     (gap <= cfg.wall_gap_gate).then_some(offset + gap)
 }
 
+/// The (track, measurement, distance) pairs within the gate, in track then measurement
+/// order. A pair gates only within `gate_max_distance` of each other, so measurements
+/// are sorted by x and each track looks only at those whose x, then y, is within that
+/// distance of its own (widened by a relative 1e-9 against rounding): the same pairs as
+/// trying every track with every measurement, at the cost of the pairs that are near.
+fn gate(
+    tracks: &[PointTrack],
+    circles: &[CircleMeasurement],
+    cfg: &PerceptionConfig,
+) -> Vec<(usize, usize, f64)> {
+    // A non-finite centre is never within the gate.
+    let mut by_x: Vec<(f64, usize)> = circles
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.centre[0].is_finite() && m.centre[1].is_finite())
+        .map(|(i, m)| (m.centre[0], i))
+        .collect();
+    by_x.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let reach = cfg.gate_max_distance * (1.0 + 1e-9) + 1e-12;
+    let mut candidates = Vec::new();
+    let mut near = Vec::new();
+    for (ti, t) in tracks.iter().enumerate() {
+        let x = t.state[0];
+        let lo = by_x.partition_point(|m| m.0 < x - reach);
+        let hi = by_x.partition_point(|m| m.0 <= x + reach);
+        near.clear();
+        near.extend(by_x.get(lo..hi).unwrap_or_default().iter().map(|m| m.1));
+        near.sort_unstable();
+        for &mi in &near {
+            let Some(m) = circles.get(mi) else {
+                continue;
+            };
+            // Out of reach in y as well: no innovation to compute.
+            if (m.centre[1] - t.state[1]).abs() > reach {
+                continue;
+            }
+            if let Some(d) = t.gated_distance(m, cfg) {
+                candidates.push((ti, mi, d));
+            }
+        }
+    }
+    candidates
+}
+
 /// Greedy global nearest neighbour: pairs (track, measurement) by increasing cost.
 fn assign(
     mut candidates: Vec<(usize, usize, f64)>,
@@ -793,14 +840,7 @@ impl Perception {
         for t in &mut self.tracks {
             t.predict(dt, cfg);
         }
-        let mut candidates = Vec::new();
-        for (ti, t) in self.tracks.iter().enumerate() {
-            for (mi, m) in detections.circles.iter().enumerate() {
-                if let Some(d) = t.gated_distance(m, cfg) {
-                    candidates.push((ti, mi, d));
-                }
-            }
-        }
+        let candidates = gate(&self.tracks, &detections.circles, cfg);
         let track_of = assign(candidates, self.tracks.len(), detections.circles.len());
         let mut updated = vec![false; self.tracks.len()];
         for (m, t) in detections.circles.iter().zip(&track_of) {
@@ -821,7 +861,7 @@ impl Perception {
         // remembered, not missed, while within `memory_radius`.
         let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
         let out_of_sight_nearby = |x: f64, y: f64, r: f64| {
-            (x - pose.x).hypot(y - pose.y) - r <= cfg.memory_radius && !sees(x, y, r)
+            distance([x, y], [pose.x, pose.y]) - r <= cfg.memory_radius && !sees(x, y, r)
         };
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
             life.memorable(cfg) && !moving && out_of_sight_nearby(x, y, r)
@@ -852,7 +892,7 @@ impl Perception {
         self.tracks.retain(|t| {
             !t.life.dead(cfg)
                 && (cfg.memory_radius <= 0.0
-                    || (t.state[0] - pose.x).hypot(t.state[1] - pose.y) - t.radius
+                    || distance([t.state[0], t.state[1]], [pose.x, pose.y]) - t.radius
                         <= cfg.memory_radius
                     || sees(t.state[0], t.state[1], t.radius))
         });
@@ -862,12 +902,13 @@ impl Perception {
         for (m, t) in detections.circles.iter().zip(&track_of) {
             // A measurement centred inside a confirmed track's circle is a fragment of
             // that object (a partial view, a cluster split by dropouts), not a new one.
-            let fragment = self.tracks.iter().any(|t| {
-                t.life.confirmed
-                    && (t.state[0] - m.centre[0]).hypot(t.state[1] - m.centre[1])
-                        < t.radius.max(m.radius)
-            });
-            if t.is_none() && !fragment {
+            let fragment = || {
+                self.tracks.iter().any(|t| {
+                    t.life.confirmed
+                        && distance([t.state[0], t.state[1]], m.centre) < t.radius.max(m.radius)
+                })
+            };
+            if t.is_none() && !fragment() {
                 self.tracks
                     .push(PointTrack::new(self.next_id, m, stamp, cfg));
                 self.next_id += 1;
@@ -972,6 +1013,8 @@ impl Perception {
             .iter()
             .rev()
             .find(|v| stamp - v.stamp >= STILL_BASELINE_S - 1e-9);
+        // The baseline's beam hits, each computed once for all the clusters.
+        let mut hits = baseline.map_or_else(Vec::new, |past| past.view.hit_cache());
         let still = detections
             .clusters
             .iter()
@@ -980,7 +1023,7 @@ impl Perception {
                     detections
                         .points
                         .get(c.clone())
-                        .is_some_and(|points| cluster_still(points, past))
+                        .is_some_and(|points| cluster_still(points, past, &mut hits))
                 })
             })
             .collect();
@@ -1108,7 +1151,7 @@ impl Within<'_> {
     /// Whether a disc at (x, y) of radius `r` comes within `radius` of the pose (or
     /// nothing is filtered).
     fn radius(&self, x: f64, y: f64, r: f64, radius: f64) -> bool {
-        !self.filtered || (x - self.pose.x).hypot(y - self.pose.y) - r <= radius
+        !self.filtered || distance([x, y], [self.pose.x, self.pose.y]) - r <= radius
     }
 }
 
@@ -1239,6 +1282,49 @@ fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gating_by_position_finds_the_pairs_all_against_all_does() {
+        let cfg = PerceptionConfig::default();
+        let circle = |x: f64, y: f64| CircleMeasurement {
+            centre: [x, y],
+            radius: 0.2,
+            centre_covariance: [[0.01, 0.0], [0.0, 0.01]],
+            radius_variance: 0.01,
+            kind: ObstacleKind::Post,
+            rms: 0.01,
+            points: 8,
+            cluster: 0,
+        };
+        // A field of posts 0.9-2.5 m apart, tracks a little off some of them, and
+        // measurements that coincide in x or y.
+        let at = |i: u32| {
+            let f = f64::from(i);
+            ((f * 0.37).sin() * 12.0 + f * 0.05, (f * 0.61).cos() * 9.0)
+        };
+        let circles: Vec<CircleMeasurement> = (0..120)
+            .map(at)
+            .chain([(3.0, 1.0), (3.0, 1.5), (3.5, 1.0)])
+            .map(|(x, y)| circle(x, y))
+            .collect();
+        let tracks: Vec<PointTrack> = (0..90)
+            .map(|i| {
+                let (x, y) = at(i * 4 / 3);
+                let m = circle(x + 0.4 * (f64::from(i)).sin(), y + 0.3);
+                PointTrack::new(u64::from(i), &m, 0.0, &cfg)
+            })
+            .collect();
+        let mut all = Vec::new();
+        for (ti, t) in tracks.iter().enumerate() {
+            for (mi, m) in circles.iter().enumerate() {
+                if let Some(d) = t.gated_distance(m, &cfg) {
+                    all.push((ti, mi, d));
+                }
+            }
+        }
+        assert!(all.len() > 90);
+        assert_eq!(gate(&tracks, &circles, &cfg), all);
+    }
 
     #[test]
     fn m_of_n_birth_and_k_miss_deletion() {

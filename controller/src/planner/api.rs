@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 
 use super::PlanError;
 use super::interval::{Interval, feasible_set, nearest_feasible};
-use super::obstacle::{Obstacle, min_clearance, obstacle_constraint};
+use super::obstacle::{
+    Obstacle, ObstacleConstraint, ends_collide, min_clearance, obstacle_constraint,
+};
 use super::optimal::optimal_a6;
 use super::path::{PolynomialPath, ReferenceLine, Trajectory, VehicleState};
 use super::sampling::Sampling;
@@ -125,6 +127,13 @@ pub struct PlanOptions {
     /// guidance, which plans several problems every T_s, does not read it, and it
     /// costs more than the plan.
     pub skip_clearance: bool,
+    /// Stop at infeasibility: once a start or a goal overlaps an obstacle, or the
+    /// forbidden intervals of the obstacles so far leave no a6, the rest are not
+    /// constrained (their sampling is most of a plan's cost). The result is the same
+    /// infeasible one, but [`PlanResult::obstacles`] holds only the reports computed
+    /// (and [`PlanResult::start_or_goal_collides`] only what they show): guidance,
+    /// which reads neither, replans infeasible problems every T_s for a standing car.
+    pub stop_when_infeasible: bool,
 }
 
 /// A planned step with the trajectory a follower needs.
@@ -224,13 +233,16 @@ impl PlanProblem {
                 value: self.wheelbase,
             });
         }
-        // A car's, as `vehicle.wheelbase` of the configuration (1e300 is no vehicle).
-        crate::ranges::WHEELBASE
-            .check(&ugv_fields::FieldPath::of(&["wheelbase"]), self.wheelbase)
-            .map_err(|e| PlanError::OutOfRange {
-                field: e.path.to_string(),
-                message: e.message,
-            })?;
+        // A car's, as `vehicle.wheelbase` of the configuration (1e300 is no vehicle);
+        // the field's path only built for a value outside.
+        if !crate::ranges::WHEELBASE.contains(self.wheelbase) {
+            crate::ranges::WHEELBASE
+                .check(&ugv_fields::FieldPath::of(&["wheelbase"]), self.wheelbase)
+                .map_err(|e| PlanError::OutOfRange {
+                    field: e.path.to_string(),
+                    message: e.message,
+                })?;
+        }
         check_radius("vehicle_radius", self.vehicle_radius)?;
         check_angle("state.theta", self.state.theta, false)?;
         check_angle("goal.theta", self.goal.theta, false)?;
@@ -276,6 +288,39 @@ impl PlanProblem {
     }
 }
 
+/// The obstacles' constraints in order, up to the one that leaves nothing feasible
+/// ([`PlanOptions::stop_when_infeasible`]). An obstacle the start or the goal
+/// overlaps (checked first for all of them: two positions each) is the only one
+/// constrained. Otherwise the forbidden intervals can only leave no a6 once a lower
+/// and an upper half-line are among them; from then on the feasible set of those so
+/// far is checked after each, and a set already empty stays empty with more.
+fn constraints_until_infeasible(
+    problem: &PlanProblem,
+    base: &Trajectory,
+    sampling: &Sampling,
+) -> Vec<ObstacleConstraint> {
+    let r0 = problem.vehicle_radius;
+    if let Some(o) = problem.obstacles.iter().find(|o| ends_collide(base, o, r0)) {
+        return vec![obstacle_constraint(base, o, r0, sampling)];
+    }
+    let mut out = Vec::with_capacity(problem.obstacles.len());
+    let mut forbidden = Vec::new();
+    let (mut below, mut above) = (false, false);
+    for o in &problem.obstacles {
+        let c = obstacle_constraint(base, o, r0, sampling);
+        if let Some(f) = c.forbidden {
+            below |= f.lo == f64::NEG_INFINITY;
+            above |= f.hi == f64::INFINITY;
+            forbidden.push(f);
+        }
+        out.push(c);
+        if below && above && feasible_set(&forbidden).is_empty() {
+            break;
+        }
+    }
+    out
+}
+
 /// Plan one step with the default options.
 pub fn plan(problem: &PlanProblem) -> Result<PlanResult, PlanError> {
     plan_with(problem, &PlanOptions::default()).map(|step| step.result)
@@ -304,11 +349,15 @@ pub fn plan_with(problem: &PlanProblem, options: &PlanOptions) -> Result<Planned
             what: "unconstrained a6",
         });
     }
-    let constraints: Vec<_> = problem
-        .obstacles
-        .iter()
-        .map(|o| obstacle_constraint(&base, o, problem.vehicle_radius, &sampling))
-        .collect();
+    let constraints: Vec<_> = if options.stop_when_infeasible {
+        constraints_until_infeasible(problem, &base, &sampling)
+    } else {
+        problem
+            .obstacles
+            .iter()
+            .map(|o| obstacle_constraint(&base, o, problem.vehicle_radius, &sampling))
+            .collect()
+    };
     let start_or_goal_collides = constraints
         .iter()
         .any(|c| c.start_collides || c.goal_collides);

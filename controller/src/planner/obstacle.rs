@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 
 use super::interval::Interval;
 use super::path::Trajectory;
-use super::sampling::{Sampling, maximise};
+use super::sampling::{Sampling, maximise, maximise_pair};
 
 /// A circular obstacle: centre at t_k, radius, constant velocity.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -146,9 +146,19 @@ fn roots_at(traj: &Trajectory, obstacle: &Obstacle, r: f64, t: f64) -> Option<(f
 
 /// Whether the vehicle overlaps the obstacle at time t (distance < R).
 fn overlaps_at(traj: &Trajectory, obstacle: &Obstacle, r: f64, t: f64) -> bool {
-    let state = traj.state_at(t);
+    // The position only (x and y of `traj.state_at(t)`, without its heading and
+    // steering angle).
+    let x = traj.x_at(t);
+    let y = traj.path().y(x);
     let (ox, oy) = obstacle.centre_at(t - traj.t_k());
-    (state.x - ox).hypot(state.y - oy) < r
+    (x - ox).hypot(y - oy) < r
+}
+
+/// Whether the vehicle overlaps the obstacle at the start or at the goal of the step
+/// (then [`obstacle_constraint`] forbids every a6).
+pub fn ends_collide(traj: &Trajectory, obstacle: &Obstacle, vehicle_radius: f64) -> bool {
+    let r = obstacle.radius + vehicle_radius;
+    overlaps_at(traj, obstacle, r, traj.t_k()) || overlaps_at(traj, obstacle, r, traj.t_f())
 }
 
 /// The a6 values an obstacle forbids during the step (the union over its collision
@@ -190,19 +200,21 @@ pub fn obstacle_constraint(
             }
         }
     }
-    let lower = if lower_infinite {
-        f64::NEG_INFINITY
-    } else {
-        let neg_lower =
-            |t: f64| roots_at(traj, obstacle, r, t).map_or(f64::NEG_INFINITY, |(a, _)| -a);
-        -maximise(&neg_lower, ta, tb, sampling).1
-    };
-    let upper = if upper_infinite {
-        f64::INFINITY
-    } else {
-        let upper_root =
-            |t: f64| roots_at(traj, obstacle, r, t).map_or(f64::NEG_INFINITY, |(_, b)| b);
-        maximise(&upper_root, ta, tb, sampling).1
+    let neg_lower = |t: f64| roots_at(traj, obstacle, r, t).map_or(f64::NEG_INFINITY, |(a, _)| -a);
+    let upper_root = |t: f64| roots_at(traj, obstacle, r, t).map_or(f64::NEG_INFINITY, |(_, b)| b);
+    let (lower, upper) = match (lower_infinite, upper_infinite) {
+        (true, true) => (f64::NEG_INFINITY, f64::INFINITY),
+        (true, false) => (f64::NEG_INFINITY, maximise(&upper_root, ta, tb, sampling).1),
+        (false, true) => (-maximise(&neg_lower, ta, tb, sampling).1, f64::INFINITY),
+        (false, false) => {
+            // Both ends from one set of samples: the roots at each sampled time once.
+            let both = |t: f64| {
+                roots_at(traj, obstacle, r, t)
+                    .map_or((f64::NEG_INFINITY, f64::NEG_INFINITY), |(a, b)| (-a, b))
+            };
+            let (lo, hi) = maximise_pair(&both, &neg_lower, &upper_root, ta, tb, sampling);
+            (-lo.1, hi.1)
+        }
     };
     if lower < upper {
         result.forbidden = Some(Interval {

@@ -306,7 +306,9 @@ impl PolynomialPath {
     /// Signed curvature y'' / (1 + y'^2)^(3/2) (1/m).
     pub fn curvature(&self, x: f64) -> f64 {
         let [_, d1, d2, _] = self.derivatives(x);
-        let cos = 1.0 / d1.hypot(1.0);
+        // sqrt, not hypot: d1^2 + 1 neither underflows nor loses digits, and where d1^2
+        // overflows cos^3 is 0 either way.
+        let cos = 1.0 / (d1 * d1 + 1.0).sqrt();
         d2 * cos * cos * cos
     }
 

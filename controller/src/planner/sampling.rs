@@ -72,8 +72,35 @@ fn golden_max(f: &dyn Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> (f64, f64) {
 /// of the `refine_candidates` best discrete local maxima by golden section on the two
 /// sampling steps around it.
 pub fn maximise(f: &dyn Fn(f64) -> f64, a: f64, b: f64, sampling: &Sampling) -> (f64, f64) {
+    let ts = sample_times(a, b, sampling);
+    let vs: Vec<f64> = ts.iter().map(|&t| f(t)).collect();
+    refine(f, &ts, &vs, sampling)
+}
+
+/// [`maximise`] of two functions over the same [a, b] whose values come from one
+/// evaluation `g` at each sampled time (`g(t)` = (`f1(t)`, `f2(t)`)): the samples are
+/// taken once for both, the golden-section refinements are each function's own. The
+/// results are exactly those of `maximise(f1, ..)` and `maximise(f2, ..)`.
+pub fn maximise_pair(
+    g: &dyn Fn(f64) -> (f64, f64),
+    f1: &dyn Fn(f64) -> f64,
+    f2: &dyn Fn(f64) -> f64,
+    a: f64,
+    b: f64,
+    sampling: &Sampling,
+) -> ((f64, f64), (f64, f64)) {
+    let ts = sample_times(a, b, sampling);
+    let (vs1, vs2): (Vec<f64>, Vec<f64>) = ts.iter().map(|&t| g(t)).unzip();
+    (
+        refine(f1, &ts, &vs1, sampling),
+        refine(f2, &ts, &vs2, sampling),
+    )
+}
+
+/// The `steps + 1` sampled times of [a, b], both ends exact.
+fn sample_times(a: f64, b: f64, sampling: &Sampling) -> Vec<f64> {
     let n = sampling.steps.max(2);
-    let ts: Vec<f64> = (0..=n)
+    (0..=n)
         .map(|j| {
             if j == n {
                 b
@@ -81,9 +108,14 @@ pub fn maximise(f: &dyn Fn(f64) -> f64, a: f64, b: f64, sampling: &Sampling) -> 
                 a + (b - a) * (j as f64 / n as f64)
             }
         })
-        .collect();
-    let vs: Vec<f64> = ts.iter().map(|&t| f(t)).collect();
-    let mut best = (a, f64::NEG_INFINITY);
+        .collect()
+}
+
+/// The best sample of `vs` (taken at `ts`), improved by golden section around the
+/// `refine_candidates` best discrete local maxima.
+fn refine(f: &dyn Fn(f64) -> f64, ts: &[f64], vs: &[f64], sampling: &Sampling) -> (f64, f64) {
+    let n = ts.len() - 1;
+    let mut best = (ts[0], f64::NEG_INFINITY);
     let mut peaks: Vec<usize> = Vec::new();
     for j in 0..=n {
         let v = vs[j];
