@@ -33,6 +33,15 @@ impl Grid {
         self.len() == 0
     }
 
+    /// The column and row of the cell holding (x, y), outside the grid too (negative or
+    /// past its size).
+    pub fn cell(&self, x: f64, y: f64) -> (i64, i64) {
+        (
+            ((x - self.x0) / self.res).floor() as i64,
+            ((y - self.y0) / self.res).floor() as i64,
+        )
+    }
+
     /// The index of the cell holding (x, y); None outside the grid (or for NaN). On
     /// the search's hottest path: the cell is found by truncation once the point is
     /// known not to lie before the grid, where truncation and `floor` agree.
@@ -78,6 +87,8 @@ mod tests {
             assert_eq!(g.index(x, y), None, "({x}, {y})");
         }
         assert_eq!(g.index(f64::NAN, 0.0), None);
+        assert_eq!(g.cell(-0.51, -1.49), (0, 1));
+        assert_eq!(g.cell(-1.01, 0.2), (-1, 4));
         assert_eq!(g.centre(5), (-0.25, -1.25));
         assert_eq!(g.hi(), [1.0, 0.0]);
     }

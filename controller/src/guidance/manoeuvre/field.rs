@@ -93,8 +93,8 @@ impl Field {
 
     fn add(&mut self, d: Disc) {
         let reach = d.r + CAP;
-        let (i0, j0) = self.cell(d.x - reach, d.y - reach);
-        let (i1, j1) = self.cell(d.x + reach, d.y + reach);
+        let (i0, j0) = self.grid.cell(d.x - reach, d.y - reach);
+        let (i1, j1) = self.grid.cell(d.x + reach, d.y + reach);
         let g = self.grid;
         for j in j0.max(0)..=j1.min(g.ny as i64 - 1) {
             for i in i0.max(0)..=i1.min(g.nx as i64 - 1) {
@@ -111,14 +111,6 @@ impl Field {
         self.discs.push(d);
         let key = bucket(d.x, d.y);
         self.buckets.entry(key).or_default().push(id);
-    }
-
-    fn cell(&self, x: f64, y: f64) -> (i64, i64) {
-        let g = &self.grid;
-        (
-            ((x - g.x0) / g.res).floor() as i64,
-            ((y - g.y0) / g.res).floor() as i64,
-        )
     }
 
     /// Whether (x, y) lies in the window.

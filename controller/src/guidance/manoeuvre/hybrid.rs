@@ -113,6 +113,8 @@ const ANALYTIC_CURVES: usize = 6;
 #[derive(Clone, Copy, Debug)]
 struct Node {
     pose: [f64; 3],
+    /// Its cell of position and heading ([`Kept::slot`]).
+    slot: usize,
     g: f64,
     parent: usize,
     forward: bool,
@@ -132,17 +134,18 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     if !h0.is_finite() {
         return Err(Failure::Unreachable);
     }
+    let mut best = Kept::new(field, s);
+    let Some(slot) = best.slot(start) else {
+        return Err(Failure::StartBlocked);
+    };
     let mut nodes = vec![Node {
         pose: start,
+        slot,
         g: 0.0,
         parent: usize::MAX,
         forward: true,
         curvature: 0.0,
     }];
-    let mut best = Kept::new(field, s);
-    let Some(slot) = best.slot(start) else {
-        return Err(Failure::StartBlocked);
-    };
     best.set(slot, 0);
     let mut open = BinaryHeap::new();
     let mut seq = 0u64;
@@ -153,7 +156,7 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     while let Some(Reverse((_, _, id))) = open.pop() {
         let node = nodes[id];
         // A node since bettered in its cell is not expanded.
-        if best.slot(node.pose).and_then(|k| best.get(k)) != Some(id) {
+        if best.get(node.slot) != Some(id) {
             continue;
         }
         if at_goal(node.pose, goal) {
@@ -190,6 +193,7 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
             }
             nodes.push(Node {
                 pose,
+                slot,
                 g,
                 parent: id,
                 forward,
