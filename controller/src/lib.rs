@@ -11,6 +11,7 @@ pub mod grid;
 pub mod guidance;
 pub mod intrusion;
 pub mod localisation;
+pub mod lockstep;
 pub mod monitor;
 pub mod perception;
 pub mod planner;

@@ -3,6 +3,7 @@
 //! ```text
 //! ugv-controller run --config mission.toml --gps /dev/ttyUSB0 --laser SERVICE --can can0
 //! ugv-controller run ... --log logs/today      and record its ports (replay: ugv-sim replay)
+//! ugv-controller run ... --lockstep ugv-hil/RUN/clock   on the simulator's clock
 //! ugv-controller plan [problem.json]        one planning step, JSON in and out
 //! ugv-controller anfis train --data runs.csv --target steer_cmd --output model.json
 //! ugv-controller check-config mission.toml
@@ -22,12 +23,14 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use firmware_bridge::CanPort;
-use firmware_bridge::clock::WallClock;
+use firmware_bridge::can::gated::GatedSocket;
+use firmware_bridge::clock::{Clock, WallClock};
 use firmware_bridge::laser::LaserSubscriber;
 use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
+use ugv_controller::lockstep::{GatedGps, SimClock};
 use ugv_controller::record::{RunInfo, Writer};
 use ugv_controller::runtime::{Exit, GpsInput, LaserInput, Runtime, SIMULATOR_PID_ENV};
 use ugv_controller::trace::TraceWriter;
@@ -108,6 +111,12 @@ struct RunArgs {
     /// stays ordinary, so the loop preempts it.
     #[arg(long, default_value_t = realtime::DEFAULT_PRIORITY, value_parser = realtime::parse_priority)]
     rt_priority: u8,
+    /// Run on the simulator's clock (lockstep HIL): take its ticks from this iceoryx2
+    /// service (`ugv-hil/<run id>/clock`, wires.json's `clock_service`) and
+    /// acknowledge each; the planning runs in the loop, as in SIL, so a run is
+    /// deterministic. docs/wire-contract.md, "Lockstep".
+    #[arg(long, value_name = "SERVICE")]
+    lockstep: Option<String>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -220,18 +229,34 @@ fn run(cli: Cli) -> Result<ExitCode> {
 fn drive(args: RunArgs) -> Result<ExitCode> {
     let cfg = run_config(&args)?;
     // The same checks as check-config: the configuration's, then the controller's own.
-    let ctl = Controller::new(&cfg)?
-        .with_planning_thread()
-        .context("starting the planning thread")?;
+    let ctl = Controller::new(&cfg)?;
+    let mut lockstep = args
+        .lockstep
+        .as_deref()
+        .map(SimClock::open)
+        .transpose()
+        .context("--lockstep")?;
+    // In lockstep the planning runs in the loop, as in SIL: the same inputs give the
+    // same plans at the same ticks.
+    let ctl = match lockstep {
+        Some(_) => ctl,
+        None => ctl
+            .with_planning_thread()
+            .context("starting the planning thread")?,
+    };
     let trace = trace_writer(&args)?;
-    let (can, gps, laser) = open_ports(&args, &cfg)?;
+    let (can, gps, laser) = open_ports(&args, &cfg, lockstep.as_ref())?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
     end_with_simulator()?;
 
-    let mut rt = Runtime::new(ctl, gps, laser, can).with_fix_timing();
+    let mut rt = Runtime::new(ctl, gps, laser, can);
+    if lockstep.is_none() {
+        // Latencies on the machine's clock: real time only.
+        rt = rt.with_fix_timing();
+    }
     if let Some(w) = trace {
         rt = rt.with_trace(w);
     }
@@ -244,16 +269,37 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
     if let Some(dir) = &args.log {
         rt = with_log(rt, dir, &args, &cfg)?;
     }
-    let mut clock = WallClock::new(COMMAND_PERIOD);
     let mut log = LoopLog::new(args.status_every);
-    let exit = rt.run(&mut clock, &stop, |k, now, rt| {
-        log.tick(k, now, rt.controller());
-    });
+    let exit = match &mut lockstep {
+        Some(clock) => {
+            let exit = drive_on(&mut rt, clock, &stop, &mut log);
+            clock.acknowledge_end(exit.code());
+            exit
+        }
+        None => drive_on(
+            &mut rt,
+            &mut WallClock::new(COMMAND_PERIOD),
+            &stop,
+            &mut log,
+        ),
+    };
     if log.tty {
         eprintln!();
     }
     report_end(&mut rt, &exit);
     Ok(ExitCode::from(exit.code()))
+}
+
+/// The loop on `clock` until it ends, its lines on stderr.
+fn drive_on<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
+    rt: &mut Runtime<G, L, B>,
+    clock: &mut impl Clock,
+    stop: &AtomicBool,
+    log: &mut LoopLog,
+) -> Exit {
+    rt.run(clock, stop, |k, now, rt| {
+        log.tick(k, now, rt.controller());
+    })
 }
 
 /// The configuration `ugv-controller run` drives with: the file's (the paper's mission
@@ -294,23 +340,34 @@ fn trace_writer(args: &RunArgs) -> Result<Option<TraceWriter>> {
 }
 
 /// The controller's ports, opened: the actuators' CAN bus (with its acceptance
-/// filter), the GPS line and the laser service; said on stderr.
+/// filter), the GPS line and the laser service, in lockstep with `lockstep` when
+/// given; said on stderr.
 fn open_ports(
     args: &RunArgs,
     cfg: &ControllerConfig,
-) -> Result<(CanPort, NmeaLink<impl Read + Write>, LaserSubscriber)> {
-    let can = CanPort::open(&args.can)?;
+    lockstep: Option<&SimClock>,
+) -> Result<(
+    CanPort<GatedSocket>,
+    GatedGps<NmeaLink<impl Read + Write + use<>>>,
+    LaserSubscriber,
+)> {
+    let can = CanPort::open_gated(&args.can, lockstep.map(SimClock::can_gate))?;
     ugv_controller::runtime::accept_controller_ids(&can)?;
     let port = open_serial(&args.gps, args.baud, Duration::ZERO)?;
     let gps = NmeaLink::new(port, ReaderConfig::default());
+    let gps = match lockstep {
+        Some(clock) => clock.gate_gps(gps),
+        None => GatedGps::new(gps, None),
+    };
     let laser = LaserSubscriber::new(&args.laser)?;
     eprintln!(
-        "ugv-controller: GPS {} at {} baud, laser {}, CAN {}, follower {:?}",
+        "ugv-controller: GPS {} at {} baud, laser {}, CAN {}, follower {:?}, clock {}",
         args.gps.display(),
         args.baud,
         args.laser,
         args.can,
-        cfg.follower.kind
+        cfg.follower.kind,
+        args.lockstep.as_deref().unwrap_or("wall")
     );
     Ok((can, gps, laser))
 }

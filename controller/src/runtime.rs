@@ -196,6 +196,8 @@ pub enum Exit {
     /// The CAN port failed: nothing more can be said to the ECUs, whose command
     /// timeouts take them to their safe state.
     CanLost { reason: String },
+    /// The simulator whose clock the loop ran on ended the run (lockstep).
+    RunOver,
 }
 
 impl Exit {
@@ -207,16 +209,17 @@ impl Exit {
             Exit::StoppedInEstop => "stopped in estop".to_owned(),
             Exit::Stopped => "stopped".to_owned(),
             Exit::CanLost { reason } => format!("CAN lost: {reason}"),
+            Exit::RunOver => "the simulator ended the run".to_owned(),
         }
     }
 
     /// The binary's exit code: 0 mission complete, 1 safety stop, 3 ended by a
-    /// signal, 4 error.
+    /// signal or by the simulator (lockstep), 4 error.
     pub fn code(&self) -> u8 {
         match self {
             Exit::Finished => 0,
             Exit::PortLost { .. } | Exit::StoppedInEstop => 1,
-            Exit::Stopped => 3,
+            Exit::Stopped | Exit::RunOver => 3,
             Exit::CanLost { .. } => 4,
         }
     }
@@ -590,6 +593,10 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
         let mut k: u64 = 0;
         loop {
             let late = clock.wait_tick(k);
+            if clock.ended() {
+                self.write_trace(clock.now(), true);
+                return Exit::RunOver;
+            }
             // A tick more than a period late (the machine stalled): the ticks missed
             // are skipped, not run back to back, so the loop's time stays the wall
             // clock's and what arrived during the stall is taken as arriving now. Run

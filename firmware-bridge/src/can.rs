@@ -7,6 +7,7 @@
 //! which.
 
 pub mod arbiter;
+pub mod gated;
 pub mod membus;
 pub mod paced;
 pub mod timed;
@@ -414,30 +415,47 @@ impl<B: embedded_can::nb::Can + Filtered> CanPort<B> {
     }
 }
 
-impl CanPort<timed::TimedSocket> {
+impl CanPort<gated::Gated<timed::TimedSocket>> {
     /// Open a raw CAN socket on `iface` whose frames are handed out by `horizon`
-    /// (see [`timed`]), sending through `pacer` when given (see [`paced`]).
+    /// (see [`timed`]), sending through `pacer` when given (see [`paced`]), and in
+    /// lockstep through `gate` (see [`gated`]).
     pub fn open_timed(
         iface: &str,
         horizon: timed::Horizon,
         pacer: Option<&paced::Pacer>,
+        gate: Option<gated::Gate>,
     ) -> Result<Self, BridgeError> {
         let socket = timed::TimedSocket::open(iface, horizon).map_err(|e| open_error(iface, e))?;
         let socket = match pacer {
             Some(p) => socket.paced(p),
             None => socket,
         };
-        Ok(CanPort::new(socket, iface))
+        Ok(CanPort::new(gated::Gated::new(socket, gate), iface))
+    }
+}
+
+/// A raw CAN socket on `iface`, non-blocking.
+fn open_socket(iface: &str) -> Result<CanSocket, BridgeError> {
+    let io = |source: io::Error| open_error(iface, source);
+    let socket = CanSocket::open(iface).map_err(io)?;
+    socket.set_nonblocking(true).map_err(io)?;
+    Ok(socket)
+}
+
+impl CanPort<gated::Gated<CanSocket>> {
+    /// Open a raw CAN socket on `iface`, in lockstep through `gate` (see [`gated`]).
+    pub fn open_gated(iface: &str, gate: Option<gated::Gate>) -> Result<Self, BridgeError> {
+        Ok(CanPort::new(
+            gated::Gated::new(open_socket(iface)?, gate),
+            iface,
+        ))
     }
 }
 
 impl CanPort<CanSocket> {
     /// Open a raw CAN socket on `iface` (vcan0, can0, ...).
     pub fn open(iface: &str) -> Result<Self, BridgeError> {
-        let io = |source: io::Error| open_error(iface, source);
-        let socket = CanSocket::open(iface).map_err(io)?;
-        socket.set_nonblocking(true).map_err(io)?;
-        Ok(CanPort::new(socket, iface))
+        Ok(CanPort::new(open_socket(iface)?, iface))
     }
 
     /// Wait up to `timeout` for a frame (woken by the socket, not polling); `None`

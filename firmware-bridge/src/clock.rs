@@ -9,6 +9,10 @@ pub trait Clock {
     fn now(&self) -> f64;
     /// Wait until tick `k` is due (k * dt after the start); returns how late it is, s.
     fn wait_tick(&mut self, k: u64) -> f64;
+    /// No tick follows: the simulator whose time this is has ended the run (lockstep).
+    fn ended(&self) -> bool {
+        false
+    }
 }
 
 /// Wall-clock ticks at `start + k * dt`: each deadline is computed from the start, not

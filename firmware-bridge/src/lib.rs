@@ -20,6 +20,7 @@ pub mod cola;
 pub mod gateway;
 pub mod geodesy;
 pub mod laser;
+pub mod lockstep;
 pub mod nmea;
 pub mod realtime;
 pub mod sync;

@@ -171,6 +171,10 @@ struct SuiteArgs {
     /// Run each scenario in HIL, in real time on the wires, with the controller binary.
     #[arg(long)]
     hil: bool,
+    /// With --hil: in lockstep (the simulator and the controller binary wait on each
+    /// other's ticks over the clock wire): deterministic, as fast as both go.
+    #[arg(long, requires = "hil")]
+    lockstep: bool,
     /// The controller binary for --hil; default: ugv-controller beside ugv-sim.
     #[arg(long, value_name = "BINARY")]
     controller: Option<PathBuf>,
@@ -251,6 +255,12 @@ struct RunArgs {
     /// first heartbeat.
     #[arg(long)]
     wait_for_controller: bool,
+    /// HIL in lockstep: the simulator publishes each controller tick on the clock wire
+    /// (wires.json's clock_service) and waits for the controller's acknowledgement, so
+    /// the run is deterministic and as fast as both go (not real time). The controller
+    /// started here gets `--lockstep SERVICE`; one started separately must be given it.
+    #[arg(long, conflicts_with = "sil")]
+    lockstep: bool,
     /// Path of the GPS link (a symlink to the pty) the controller opens.
     #[arg(long)]
     gps_link: Option<PathBuf>,
@@ -459,7 +469,7 @@ fn run_ecu(
     // Read through a horizon, with a deep queue: a stalled host does not make it
     // miss the controller's frames (firmware_bridge::can::timed).
     let horizon = Horizon::new();
-    let port = CanPort::open_timed(can, horizon.clone(), None)
+    let port = CanPort::open_timed(can, horizon.clone(), None, None)
         .with_context(|| format!("{kind:?} ECU on {can}"))?;
     port.accept_only(&kind.accepts())
         .with_context(|| format!("{kind:?} ECU's acceptance filter on {can}"))?;
@@ -748,6 +758,7 @@ fn hil_options(sc: &Scenario, args: &RunArgs, live: Option<Arc<LiveView>>) -> Hi
         controller_log: args.controller_log,
         live,
         rt_priority: args.rt_priority,
+        lockstep: args.lockstep,
     }
 }
 
@@ -782,6 +793,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         },
         cans: &args.cans,
         isolate: args.isolate,
+        lockstep: args.lockstep,
         record: args.record,
         results: &args.results,
         stop: &stop,
@@ -878,6 +890,8 @@ struct HilSuite<'a> {
     cans: &'a [String],
     /// Each run in a private network namespace of its own (`--isolate`).
     isolate: bool,
+    /// Each run in lockstep (`--lockstep`).
+    lockstep: bool,
     /// Record each run (`--record`).
     record: bool,
     /// The suite's results folder; each run's go in a folder of its own in it.
@@ -920,6 +934,7 @@ impl HilSuite<'_> {
             controller_log: false,
             live: None,
             rt_priority: realtime::DEFAULT_PRIORITY,
+            lockstep: self.lockstep,
         };
         std::fs::create_dir_all(&options.results).map_err(|e| e.to_string())?;
         let endpoints = Endpoints::open(&sc, &options, &mut |_| {}).map_err(|e| e.to_string())?;

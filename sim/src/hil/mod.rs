@@ -8,6 +8,7 @@
 //! [`run_scenario`], which orchestrates the run: the controller's process
 //! ([`process`]), the real-time tick loop ([`run_hil`]), the judging and the results.
 
+mod lockstep;
 mod process;
 mod wires;
 
@@ -16,6 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use firmware_bridge::can::gated::{Gate, Gated};
 use firmware_bridge::can::paced::Pacer;
 use firmware_bridge::can::timed::{Horizon, TimedSocket};
 use firmware_bridge::clock::{Clock, WallClock};
@@ -24,6 +26,7 @@ use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::trace::Trace;
 
+pub use lockstep::{ACK_TIMEOUT, FIRST_ACK_TIMEOUT, Lockstep, run_lockstep};
 pub use process::{ControllerProcess, ensure_no_controller, spawn_controller, wait_for_controller};
 pub use wires::{WireMap, Wires, gateway_log};
 
@@ -106,7 +109,15 @@ pub enum HilError {
     Results(#[from] crate::verdict::ResultsError),
     #[error("recording: {0}")]
     Record(#[from] crate::record::RecordError),
+    #[error("lockstep: {0}")]
+    Clock(String),
+    #[error("lockstep: {0}")]
+    NotInLockstep(&'static str),
 }
+
+/// A simulated ECU's CAN socket: timed (see firmware_bridge::can::timed) and, in
+/// lockstep, gated (see firmware_bridge::can::gated).
+pub type EcuSocket = Gated<TimedSocket>;
 
 /// The simulator's endpoints of one HIL run, opened by the binary and handed to
 /// [`run_scenario`]: the ECUs' CAN sockets (timed, sharing one horizon, and paced at
@@ -114,8 +125,10 @@ pub enum HilError {
 /// same bus, and the wires. With `--isolate`, all of them live
 /// in the run's private network namespace, which lasts as long as they do.
 pub struct Endpoints {
-    steering: CanPort<TimedSocket>,
-    throttle: CanPort<TimedSocket>,
+    steering: CanPort<EcuSocket>,
+    throttle: CanPort<EcuSocket>,
+    /// The ECUs' gate, in lockstep.
+    gate: Option<Gate>,
     /// The pacing of the ECUs' transmissions (`can.bit_timing`).
     pacer: Option<Pacer>,
     tap: Option<SocketTap>,
@@ -143,6 +156,9 @@ impl Endpoints {
         log: &mut dyn FnMut(&str),
     ) -> Result<Endpoints, HilError> {
         let sc = scenario;
+        if options.lockstep {
+            check_lockstep(sc)?;
+        }
         if options.controller.is_some() {
             if matches!(sc.devices.controller, ControllerSite::Board { .. }) {
                 return Err(HilError::BoardControllerStarted);
@@ -165,13 +181,14 @@ impl Endpoints {
             .can
             .bit_timing
             .then(|| Pacer::new(golf_car_can::NETWORK.baudrate, 1.0 / sc.sim.physics_hz));
+        let gate = options.lockstep.then(Gate::new);
         let open = |what: &str| {
-            CanPort::open_timed(&iface, horizon.clone(), pacer.as_ref()).map_err(|source| {
-                HilError::Can {
+            CanPort::open_timed(&iface, horizon.clone(), pacer.as_ref(), gate.clone()).map_err(
+                |source| HilError::Can {
                     iface: format!("{iface} ({what})"),
                     source,
-                }
-            })
+                },
+            )
         };
         let (steering, throttle) = (open("steering ECU")?, open("throttle ECU")?);
         // The steering ECU's socket is the simulator's view of the whole bus: it
@@ -203,10 +220,12 @@ impl Endpoints {
             horizon,
             gateway_logs,
             options.rt_priority,
+            options.lockstep,
         )?;
         Ok(Endpoints {
             steering,
             throttle,
+            gate,
             pacer,
             tap,
             wires,
@@ -219,7 +238,7 @@ impl Endpoints {
 /// the run is over, `stop` is raised, or the controller exits. Returns the outcome
 /// and the monotonic time of tick 0 (see [`fix_latency`]).
 pub fn run_hil(
-    sim: &mut Sim<TimedSocket>,
+    sim: &mut Sim<EcuSocket>,
     wires: &mut Wires,
     mut controller: Option<&mut ControllerProcess>,
     stop: &AtomicBool,
@@ -266,19 +285,7 @@ pub fn run_hil(
         if let Some(o) = outcome {
             return Ok((o, started));
         }
-        let wanted = sim.process_fault();
-        if wanted != process {
-            let Some(c) = controller.as_deref_mut() else {
-                return Err(HilError::ProcessFaultWithoutProcess);
-            };
-            use nix::sys::signal::Signal;
-            c.signal(match wanted {
-                ProcessFault::Killed => Signal::SIGKILL,
-                ProcessFault::Stopped => Signal::SIGSTOP,
-                ProcessFault::Running => Signal::SIGCONT,
-            });
-            process = wanted;
-        }
+        signal_process_fault(sim, controller.as_deref_mut(), &mut process)?;
         // The run goes on until the car is safe, so the verdict can say how fast each
         // ECU got there.
         if k.is_multiple_of(20)
@@ -288,6 +295,46 @@ pub fn run_hil(
             sim.controller_gone(format!("the controller exited ({exit})"));
         }
     }
+}
+
+/// Signal the controller's process when the fault plan changes what it should be
+/// doing (killed, stopped, running); `process` is what it was told last.
+fn signal_process_fault(
+    sim: &Sim<EcuSocket>,
+    controller: Option<&mut ControllerProcess>,
+    process: &mut ProcessFault,
+) -> Result<(), HilError> {
+    let wanted = sim.process_fault();
+    if wanted == *process {
+        return Ok(());
+    }
+    let Some(c) = controller else {
+        return Err(HilError::ProcessFaultWithoutProcess);
+    };
+    use nix::sys::signal::Signal;
+    c.signal(match wanted {
+        ProcessFault::Killed => Signal::SIGKILL,
+        ProcessFault::Stopped => Signal::SIGSTOP,
+        ProcessFault::Running => Signal::SIGCONT,
+    });
+    *process = wanted;
+    Ok(())
+}
+
+/// What lockstep cannot run: devices outside the simulator (they keep their own
+/// time), and a bus paced at its bit rate on the wall clock.
+fn check_lockstep(sc: &Scenario) -> Result<(), HilError> {
+    if !sc.devices.all_simulated() {
+        return Err(HilError::NotInLockstep(
+            "the device map puts a device outside the simulator, and a physical device keeps its own time (run it in real time, without --lockstep)",
+        ));
+    }
+    if sc.can.bit_timing {
+        return Err(HilError::NotInLockstep(
+            "can.bit_timing paces the bus on the wall clock (run it in real time, without --lockstep)",
+        ));
+    }
+    Ok(())
 }
 
 /// How to run a scenario on the wires.
@@ -323,6 +370,9 @@ pub struct HilOptions {
     /// SCHED_FIFO priority of the tick loop while it runs, 0 for none (see
     /// [`firmware_bridge::realtime`]).
     pub rt_priority: u8,
+    /// Lockstep: the simulator and the controller wait on each other's ticks over the
+    /// clock wire (see [`run_lockstep`]), instead of both running on the wall clock.
+    pub lockstep: bool,
 }
 /// The controller `ugv-sim run --controller` starts, once its bus is known to be free
 /// (none without --controller).
@@ -376,6 +426,7 @@ pub fn run_scenario(
     let Endpoints {
         steering,
         throttle,
+        gate,
         pacer,
         tap,
         mut wires,
@@ -388,7 +439,14 @@ pub fn run_scenario(
     let (config_path, trace_path) = write_run_files(options, &wires.map, config)?;
     let mut controller =
         start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
-    if controller.is_none() && !await_controller(sc, options, &iface, &config_path, stop, log)? {
+    if options.lockstep {
+        log(&format!(
+            "lockstep on {}: the simulator waits for each tick's acknowledgement",
+            wires.map.clock_service.as_deref().unwrap_or("?")
+        ));
+    } else if controller.is_none()
+        && !await_controller(sc, options, &iface, &config_path, stop, log)?
+    {
         return Ok(stopped_before_start(sc, &sim));
     }
     log(&format!(
@@ -398,21 +456,39 @@ pub fn run_scenario(
     // The controller and every helper thread were started: they stay ordinary.
     let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
     log(&rt_sched.promotion.describe("tick loop"));
-    let run = run_hil(
-        &mut sim,
-        &mut wires,
-        controller.as_mut(),
-        stop,
-        options.status_every,
-        status,
-        recording.as_mut(),
-    );
+    let clock = wires.clock.take();
+    let run = match (&gate, &clock) {
+        (Some(gate), Some(leader)) => run_lockstep(
+            &mut sim,
+            &mut wires,
+            &Lockstep { leader, gate },
+            controller.as_mut(),
+            stop,
+            options.status_every,
+            status,
+            recording.as_mut(),
+        ),
+        _ => run_hil(
+            &mut sim,
+            &mut wires,
+            controller.as_mut(),
+            stop,
+            options.status_every,
+            status,
+            recording.as_mut(),
+        ),
+    };
     drop(rt_sched);
     if let Some(summary) = recording.and_then(Recording::finish) {
         log(&crate::record::describe(&summary));
     }
     // Whatever happened, the controller is asked to finish and its trace collected.
-    let trace = controller.as_mut().and_then(|c| finish_controller(c, log));
+    let mut trace = controller.as_mut().and_then(|c| finish_controller(c, log));
+    if let (true, Some(t)) = (options.lockstep, &mut trace) {
+        // The controller's loop ended with the simulator's run: its length is the
+        // simulator's, as in SIL (the controller's last tick may be a step before).
+        t.duration = sim.time();
+    }
     let (outcome, started_ns) = run?;
     if let Some(p) = &pacer {
         sim.bus_arbitrated(p.stats());
@@ -442,10 +518,7 @@ pub fn run_scenario(
 }
 
 /// The verdict of a run stopped by signal while it waited for its controller.
-fn stopped_before_start(
-    sc: &Scenario,
-    sim: &Sim<TimedSocket>,
-) -> (crate::verdict::Verdict, Outcome) {
+fn stopped_before_start(sc: &Scenario, sim: &Sim<EcuSocket>) -> (crate::verdict::Verdict, Outcome) {
     let outcome = Outcome::Stopped {
         time: 0.0,
         reason: "stopped by signal".to_owned(),

@@ -126,7 +126,7 @@ pub struct ControllerProcess {
 }
 
 /// Start `binary run --config CONFIG --gps LINK --baud BAUD --laser SERVICE --can IFACE
-/// --trace TRACE [--log LOG] [extra...]` (the controller contract, README). `log` is
+/// --trace TRACE [--log LOG] [--lockstep CLOCK] [extra...]` (the controller contract, README). `log` is
 /// left out when `extra` names a `--log` of its own.
 pub fn spawn_controller(
     binary: &Path,
@@ -165,6 +165,12 @@ pub fn spawn_controller(
         .arg("--trace")
         .arg(trace)
         .args(log)
+        .args(
+            wires
+                .clock_service
+                .iter()
+                .flat_map(|c| ["--lockstep", c.as_str()]),
+        )
         .args(extra)
         .stdin(Stdio::null())
         .spawn()

@@ -8,6 +8,7 @@ use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::cola::{ColaServer, DecodeOptions, ServerConfig};
 use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayHandle};
 use firmware_bridge::laser::{LaserFrame, LaserPublisher, service_name};
+use firmware_bridge::lockstep::{ClockLeader, clock_service_name};
 
 use super::HilError;
 use crate::devices::cola_driver::ColaDriverThread;
@@ -40,6 +41,8 @@ pub struct WireMap {
     pub gateways: Vec<(String, Vec<&'static str>)>,
     /// "local", or "board on <iface>".
     pub controller: String,
+    /// The clock wire in lockstep (`ugv-hil/<run id>/clock`), `null` in real time.
+    pub clock_service: Option<String>,
 }
 
 /// Where the simulated scans go.
@@ -63,6 +66,8 @@ pub struct Wires {
     gateways: Vec<GatewayHandle>,
     /// Up to when the simulated ECUs' timed sockets hand out frames (set per tick).
     pub(super) can_horizon: Horizon,
+    /// The clock wire's simulator end, in lockstep.
+    pub(super) clock: Option<ClockLeader>,
 }
 
 impl std::fmt::Debug for Wires {
@@ -208,8 +213,16 @@ impl Wires {
         can_horizon: Horizon,
         gateway_logs: Option<&Path>,
         rt_priority: u8,
+        lockstep: bool,
     ) -> Result<Wires, HilError> {
         let devices = &sc.devices;
+        let clock = match lockstep {
+            true => Some(
+                ClockLeader::new(&clock_service_name(run_id))
+                    .map_err(|e| HilError::Clock(e.to_string()))?,
+            ),
+            false => None,
+        };
         let (gps, gps_line) = match &devices.gps {
             GpsOutput::Pty {} => (GpsPort::open(Some(gps_link), sc.gps.baud)?, "pty"),
             GpsOutput::Serial { device, baud, .. } => (
@@ -243,12 +256,14 @@ impl Wires {
                     ControllerSite::Local {} => "local".to_owned(),
                     ControllerSite::Board { can } => format!("board on {can}"),
                 },
+                clock_service: clock.as_ref().map(|c| c.service().to_owned()),
             },
             gps,
             laser: laser.out,
             driver: laser.driver,
             gateways,
             can_horizon,
+            clock,
         })
     }
 
@@ -310,6 +325,7 @@ mod tests {
             can: "vcan0".to_owned(),
             gateways: vec![("can1".to_owned(), vec!["STEERING_ECU"])],
             controller: "local".to_owned(),
+            clock_service: None,
         };
         let json = serde_json::to_string(&map)?;
         assert!(json.starts_with("{\"version\":1,"), "{json}");
@@ -330,6 +346,7 @@ mod tests {
             "can",
             "gateways",
             "controller",
+            "clock_service",
         ];
         documented.sort_unstable();
         assert_eq!(keys, documented);
