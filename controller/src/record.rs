@@ -94,7 +94,7 @@ pub enum RecordError {
     },
 }
 
-/// Which loop made a recording; written `"sil"`, `"hil"`, `"field"`.
+/// Which loop made a recording; written `"sil"`, `"hil"`, `"lockstep"`, `"field"`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordMode {
@@ -102,6 +102,9 @@ pub enum RecordMode {
     Sil,
     /// The simulator's, of a HIL run (the controller binary in a process of its own).
     Hil,
+    /// The simulator's, of a lockstep HIL run (the controller binary on the
+    /// simulator's clock): every input at the tick that took it, as in SIL.
+    Lockstep,
     /// The controller binary's own (`ugv-controller run --log`): on the car, on the
     /// bench, or beside a HIL run.
     Field,
@@ -307,6 +310,8 @@ pub struct Writer {
     spec: NetworkSpec,
     info: RunInfo,
     last_flush: Instant,
+    /// The log time of the last flush by log time ([`Writer::maybe_flush_at`]).
+    last_flush_t: f64,
     cadence: StateCadence,
     /// Whether files are written (else the channels serve a live view only).
     files: bool,
@@ -387,6 +392,7 @@ impl Writer {
             spec: NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?,
             info,
             last_flush: Instant::now(),
+            last_flush_t: 0.0,
             cadence: StateCadence::default(),
             files: dir.is_some(),
             summary: RecordSummary {
@@ -662,6 +668,19 @@ impl Writer {
     /// Hand what was written to the kernel when [`FLUSH_PERIOD`] has passed.
     pub fn maybe_flush(&mut self) {
         if self.last_flush.elapsed() >= FLUSH_PERIOD {
+            self.flush();
+        }
+    }
+
+    /// [`Writer::maybe_flush`] for a recording written at log time `t`: a lockstep
+    /// run's flushes go by its own time, so that its chunks, and the file, are the same
+    /// in every run of it.
+    pub fn maybe_flush_at(&mut self, t: f64) {
+        if self.info.mode != RecordMode::Lockstep {
+            return self.maybe_flush();
+        }
+        if t >= self.last_flush_t + FLUSH_PERIOD.as_secs_f64() {
+            self.last_flush_t = t;
             self.flush();
         }
     }

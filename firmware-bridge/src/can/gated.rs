@@ -113,6 +113,11 @@ impl<B> Gated<B> {
         &mut self.inner
     }
 
+    /// Whether it is in lockstep.
+    pub fn gated(&self) -> bool {
+        self.gate.is_some()
+    }
+
     /// Frames this endpoint was told of but that did not come within [`GATE_TIMEOUT`].
     pub fn waived(&self) -> u64 {
         self.waived

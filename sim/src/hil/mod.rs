@@ -202,13 +202,16 @@ impl Endpoints {
                 source,
             })?;
         // The tap feeds the recording and the live view alike.
-        let tap = match options.record || options.live.is_some() {
-            true => Some(SocketTap::open(&iface).map_err(|source| RecordError::Tap {
-                iface: iface.clone(),
-                source,
-            })?),
-            false => None,
-        };
+        let tap =
+            match options.record || options.live.is_some() {
+                true => Some(SocketTap::open(&iface, gate.clone()).map_err(|source| {
+                    RecordError::Tap {
+                        iface: iface.clone(),
+                        source,
+                    }
+                })?),
+                false => None,
+            };
         let gps_link = options.gps_link.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("ugv-hil-{}-gps", options.run_id))
         });
@@ -549,7 +552,11 @@ fn open_recording(
         return Ok(None);
     };
     let toml = toml::to_string_pretty(config).unwrap_or_default();
-    let info = run_info(RecordMode::Hil, sc, toml);
+    let mode = match options.lockstep {
+        true => RecordMode::Lockstep,
+        false => RecordMode::Hil,
+    };
+    let info = run_info(mode, sc, toml);
     let outputs = Outputs {
         dir: options.record.then_some(options.results.as_path()),
         live: options.live.as_deref(),

@@ -396,7 +396,7 @@ impl<T: BusTap> Recording<T> {
         if let Some(c) = controller {
             self.recorder.w.controller(t, c);
         }
-        self.recorder.w.maybe_flush();
+        self.recorder.w.maybe_flush_at(t);
     }
 
     /// See [`Recorder::finish`]; the summary also says how many frames the tap lost.

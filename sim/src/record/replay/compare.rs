@@ -55,7 +55,7 @@ impl Tolerance {
     /// [`Tolerance::HIL`].
     pub fn for_mode(mode: RecordMode) -> Tolerance {
         match mode {
-            RecordMode::Sil | RecordMode::Field => Tolerance::EXACT,
+            RecordMode::Sil | RecordMode::Lockstep | RecordMode::Field => Tolerance::EXACT,
             RecordMode::Hil => Tolerance::HIL,
         }
     }

@@ -146,7 +146,7 @@ const LINE_BUFFER: usize = 4096;
 /// would wait for ECUs that the recording shows enabling only later, and estop).
 fn controller_start(rec: &Recorded) -> u64 {
     match rec.info.mode {
-        RecordMode::Sil | RecordMode::Field => rec.info.epoch_unix_ns,
+        RecordMode::Sil | RecordMode::Lockstep | RecordMode::Field => rec.info.epoch_unix_ns,
         RecordMode::Hil => rec
             .commands
             .first()
@@ -217,7 +217,7 @@ fn replayed_controller(
     trace: Option<TraceWriter>,
 ) -> Result<Runtime<MemGps, MemLaser, MemEndpoint>, ReplayError> {
     let controller = match rec.info.mode {
-        RecordMode::Sil => Controller::new(&rec.config)?,
+        RecordMode::Sil | RecordMode::Lockstep => Controller::new(&rec.config)?,
         RecordMode::Hil => Controller::new(&rec.config)?.with_plans_taken_next_tick(),
         RecordMode::Field => {
             Controller::new(&rec.config)?.with_plans_taken_at(rec.plans_taken_at.clone())
