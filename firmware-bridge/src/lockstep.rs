@@ -390,6 +390,15 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_clock_wire_has_the_documented_layout() {
+        // docs/wire-contract.md, "Lockstep": no padding anywhere.
+        assert_eq!(std::mem::size_of::<CanCounts>(), 208);
+        assert_eq!(std::mem::size_of::<ClockTick>(), 232);
+        assert_eq!(std::mem::size_of::<ClockAck>(), 232);
+        assert_eq!(std::mem::align_of::<ClockTick>(), 8);
+    }
+
+    #[test]
     fn can_counts_count_per_id_and_by_acceptance() {
         let mut c = CanCounts::default();
         for id in [0x100, 0x100, 0x200, 0x8000_0300] {

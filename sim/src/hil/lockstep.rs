@@ -196,7 +196,6 @@ pub fn run_lockstep(
         let out = sim.take_outputs();
         if let Some(r) = recording.as_deref_mut() {
             r.sensors(now, &out);
-            r.after_step(now, sim, None);
         }
         // The whole epoch at once, as SIL hands it over: the controller reads the
         // bytes the tick says.
@@ -228,6 +227,11 @@ pub fn run_lockstep(
                     controller.as_deref_mut(),
                 )?,
             };
+        }
+        // The bus after the controller's tick, as SIL records it: the ECUs' frames of
+        // this step and the controller's of this tick.
+        if let Some(r) = recording.as_deref_mut() {
+            r.after_step(now, sim, None);
         }
         if let Some(o) = outcome {
             break o;
