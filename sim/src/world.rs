@@ -13,6 +13,12 @@ use rapier2d::prelude::*;
 use crate::scenario::schema::{Motion, Obstacle, VehicleConfig};
 use crate::vehicle::VehicleState;
 
+mod clearance;
+pub mod ray;
+
+pub use clearance::Clearances;
+use ray::{Fan, Hit, Prim};
+
 /// One obstacle of the scenario in the physics world.
 #[derive(Debug)]
 struct Body {
@@ -25,6 +31,8 @@ struct Body {
 pub struct World {
     physics: PhysicsWorld,
     bodies: Vec<Body>,
+    /// The same shapes in f64 for the laser ([`ray`]), in the order of `bodies`.
+    prims: Vec<Prim>,
     time: f64,
 }
 
@@ -169,9 +177,15 @@ impl World {
                 colliders,
             });
         }
+        let prims = obstacles
+            .iter()
+            .enumerate()
+            .flat_map(|(i, o)| prims_of(i, o))
+            .collect();
         let mut world = World {
             physics,
             bodies,
+            prims,
             time: 0.0,
         };
         world.refresh();
@@ -187,7 +201,7 @@ impl World {
     pub fn set_time(&mut self, t: f64) {
         self.time = t;
         let mut moved = false;
-        for b in &self.bodies {
+        for (i, b) in self.bodies.iter().enumerate() {
             let (x0, y0, heading, motion) = match &b.spec {
                 Obstacle::Circle { x, y, motion, .. } => (*x, *y, 0.0, motion),
                 Obstacle::Box {
@@ -203,6 +217,9 @@ impl World {
                 continue;
             }
             let (x, y) = position_at(x0, y0, motion, t);
+            for p in self.prims.iter_mut().filter(|p| p.obstacle == i) {
+                (p.x, p.y) = (x, y);
+            }
             if let Some(body) = self.physics.bodies.get_mut(b.handle) {
                 body.set_position(Pose::new(vec2(x, y), heading as Real), true);
                 moved = true;
@@ -211,13 +228,6 @@ impl World {
         if moved {
             self.refresh();
         }
-    }
-
-    fn obstacle_of(&self, handle: ColliderHandle) -> Option<usize> {
-        self.physics
-            .colliders
-            .get(handle)
-            .map(|c| c.user_data as usize)
     }
 
     fn hits(&self, pose: Pose, shape: &dyn Shape) -> Vec<usize> {
@@ -256,31 +266,60 @@ impl World {
         )
     }
 
-    /// Distance from the footprint to each obstacle (0 when touching or overlapping).
-    pub fn clearances(&self, cfg: &VehicleConfig, state: &VehicleState) -> Vec<f64> {
-        let (pose, shape) = Self::footprint(cfg, state);
-        self.bodies
-            .iter()
-            .map(|b| {
-                b.colliders
-                    .iter()
-                    .filter_map(|h| self.physics.colliders.get(*h))
-                    .filter_map(|c| {
-                        parry::query::distance(&pose, &shape, c.position(), c.shape()).ok()
-                    })
-                    .map(|d| f64::from(d.distance))
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .collect()
+    /// Distance from a shape at `pose` to one collider (0 when touching or
+    /// overlapping), or `None` when it cannot be measured.
+    fn distance(&self, collider: ColliderHandle, pose: &Pose, shape: &Cuboid) -> Option<f64> {
+        let c = self.physics.colliders.get(collider)?;
+        parry::query::distance(pose, shape, c.position(), c.shape())
+            .ok()
+            .map(|d| f64::from(d.distance))
     }
 
     /// Cast a ray from `(x, y)` in direction `angle` (radians, world frame) up to
     /// `max_range`: the obstacle hit and the range, or `None` for no return.
     pub fn cast_ray(&self, x: f64, y: f64, angle: f64, max_range: f64) -> Option<(usize, f64)> {
-        let ray = Ray::new(vec2(x, y), vec2(angle.cos(), angle.sin()));
-        self.physics
-            .cast_ray(&ray, max_range as Real, true, QueryFilter::default())
-            .and_then(|(h, toi)| Some((self.obstacle_of(h)?, f64::from(toi))))
+        ray::cast(&self.prims, x, y, angle, max_range).map(|(t, i)| (i, t))
+    }
+
+    /// Every beam of `fan` from the scanner pose `(x, y, heading)` up to `max_range`:
+    /// `hits[i]` is beam `i`'s range and obstacle (`f64::INFINITY` for no return).
+    pub fn scan(&self, pose: (f64, f64, f64), fan: &Fan, max_range: f64, hits: &mut Vec<Hit>) {
+        ray::scan(&self.prims, fan, pose, max_range, hits);
+    }
+}
+
+/// The shapes of obstacle `i` for the ray caster, as [`World::new`] builds its colliders.
+fn prims_of(i: usize, o: &Obstacle) -> Vec<Prim> {
+    match o {
+        Obstacle::Circle { x, y, radius, .. } => vec![Prim::circle(i, *x, *y, *radius)],
+        Obstacle::Box {
+            x,
+            y,
+            length,
+            width,
+            heading_deg,
+            ..
+        } => vec![Prim::rect(
+            i,
+            *x,
+            *y,
+            heading_deg.to_radians(),
+            length / 2.0,
+            width / 2.0,
+        )],
+        Obstacle::Wall { points, thickness } => {
+            let segments = points.windows(2).map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let (mx, my) = ((a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0);
+                let half = (dx * dx + dy * dy).sqrt() / 2.0;
+                Prim::rect(i, mx, my, dy.atan2(dx), half, thickness / 2.0)
+            });
+            let joints = points.iter().skip(1).take(points.len().saturating_sub(2));
+            segments
+                .chain(joints.map(|p| Prim::circle(i, p[0], p[1], thickness / 2.0)))
+                .collect()
+        }
     }
 }
 
@@ -305,7 +344,8 @@ mod tests {
         // The rear axle at (17.5, 8): the footprint reaches into the post at (19, 8).
         assert_eq!(w.footprint_hits(&s.vehicle, &at(17.5, 8.0)), vec![0]);
         // Clearance to the post: the front bumper at x = 2.025 from the axle.
-        let c = w.clearances(&s.vehicle, &at(10.0, 8.0));
+        let c = Clearances::new(&w, &s.vehicle, &at(10.0, 8.0));
+        let c = c.min();
         let front = 10.0 + s.vehicle.length - s.vehicle.rear_overhang;
         assert!((c[0] - (19.0 - 3.0 - front)).abs() < 1e-4, "{c:?}");
     }
