@@ -129,3 +129,90 @@ impl Clearances {
         self.version += 1;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+    use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+
+    /// Every collider measured at every step, as before the schedule.
+    fn brute(world: &World, cfg: &VehicleConfig, state: &VehicleState) -> Vec<f64> {
+        let (pose, shape) = World::footprint(cfg, state);
+        world
+            .bodies
+            .iter()
+            .map(|b| {
+                b.colliders
+                    .iter()
+                    .filter_map(|h| world.distance(*h, &pose, &shape))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_schedule_gives_the_minima_and_contacts_of_measuring_everything() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut s = Scenario::default();
+        s.obstacles = (0..80)
+            .map(|_| Obstacle::Circle {
+                x: rng.random_range(-60.0..60.0),
+                y: rng.random_range(-60.0..60.0),
+                radius: rng.random_range(0.2..1.5),
+                motion: None,
+            })
+            .collect();
+        // Touching the car at the start.
+        s.obstacles.push(Obstacle::Circle {
+            x: 1.0,
+            y: 0.0,
+            radius: 0.5,
+            motion: None,
+        });
+        s.obstacles.push(Obstacle::Wall {
+            points: vec![[-30.0, -40.0], [30.0, -40.0], [30.0, 40.0]],
+            thickness: 0.4,
+        });
+        let world = World::new(&s.obstacles);
+        let mut state = VehicleState::at(&crate::scenario::Pose {
+            x: 0.0,
+            y: 0.0,
+            heading_deg: 0.0,
+        });
+        let mut c = Clearances::new(&world, &s.vehicle, &state);
+        let mut min = brute(&world, &s.vehicle, &state);
+        let (mut skipped_steps, mut contacts) = (0, 0);
+        for k in 0..20_000 {
+            // Drive, turn, stand still in turns.
+            let (v, phi) = match (k / 400) % 3 {
+                0 => (3.0, rng.random_range(-0.4..0.4)),
+                1 => (0.0, 0.0),
+                _ => (-1.5, 0.3),
+            };
+            state.step(s.vehicle.wheelbase, v, phi, 0.005);
+            let now = brute(&world, &s.vehicle, &state);
+            for (m, d) in min.iter_mut().zip(&now) {
+                *m = m.min(*d);
+            }
+            let before = c.items.iter().map(|i| i.version).collect::<Vec<_>>();
+            let touched = c.update(&world, &s.vehicle, &state);
+            assert_eq!(touched, now.iter().position(|d| *d <= 0.0), "step {k}");
+            contacts += usize::from(touched.is_some());
+            assert_eq!(c.min(), &min[..], "step {k}");
+            let measured = c
+                .items
+                .iter()
+                .zip(&before)
+                .filter(|(i, b)| i.version != **b);
+            skipped_steps += c.items.len() - measured.count();
+        }
+        assert!(contacts > 0, "the drive touches something");
+        // Most measurements were skipped.
+        eprintln!("{skipped_steps} of {}", 20_000 * c.items.len());
+        assert!(
+            skipped_steps > 20_000 * c.items.len() / 3,
+            "{skipped_steps}"
+        );
+    }
+}
