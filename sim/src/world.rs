@@ -17,7 +17,7 @@ mod clearance;
 pub mod ray;
 
 pub use clearance::Clearances;
-use ray::{Fan, Hit, Prim};
+use ray::{Fan, Form, Hit, Prim};
 
 /// One obstacle of the scenario in the physics world.
 #[derive(Debug)]
@@ -25,6 +25,8 @@ struct Body {
     spec: Obstacle,
     handle: RigidBodyHandle,
     colliders: Vec<ColliderHandle>,
+    /// Its shapes in [`World::prims`].
+    prims: std::ops::Range<usize>,
 }
 
 /// The physics world of one run.
@@ -105,83 +107,38 @@ impl World {
         let mut physics = PhysicsWorld::new();
         physics.gravity = Vector::ZERO;
         let mut bodies = Vec::with_capacity(obstacles.len());
+        let mut prims = Vec::with_capacity(obstacles.len());
         for (i, o) in obstacles.iter().enumerate() {
-            let tag = i as u128;
-            let (body, shapes): (RigidBodyBuilder, Vec<ColliderBuilder>) = match o {
-                Obstacle::Circle {
-                    x,
-                    y,
-                    radius,
-                    motion,
-                } => (
-                    body_for(motion).translation(vec2(*x, *y)),
-                    vec![ColliderBuilder::ball(*radius as Real)],
-                ),
-                Obstacle::Box {
-                    x,
-                    y,
-                    length,
-                    width,
-                    heading_deg,
-                    motion,
-                } => (
-                    body_for(motion)
-                        .pose(Pose::new(vec2(*x, *y), heading_deg.to_radians() as Real)),
-                    vec![ColliderBuilder::cuboid(
-                        (*length / 2.0) as Real,
-                        (*width / 2.0) as Real,
-                    )],
-                ),
-                Obstacle::Wall { points, thickness } => {
-                    // One box per segment (flat, exact ends) and a post at every inner
-                    // joint so corners are closed.
-                    let mut shapes = Vec::new();
-                    for w in points.windows(2) {
-                        let (a, b) = (w[0], w[1]);
-                        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-                        let len = (dx * dx + dy * dy).sqrt();
-                        shapes.push(
-                            ColliderBuilder::cuboid(
-                                (len / 2.0) as Real,
-                                (*thickness / 2.0) as Real,
-                            )
-                            .position(Pose::new(
-                                vec2((a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0),
-                                dy.atan2(dx) as Real,
-                            )),
-                        );
-                    }
-                    for p in points.iter().skip(1).take(points.len().saturating_sub(2)) {
-                        shapes.push(
-                            ColliderBuilder::ball((*thickness / 2.0) as Real)
-                                .position(Pose::from_translation(vec2(p[0], p[1]))),
-                        );
-                    }
-                    (RigidBodyBuilder::fixed(), shapes)
+            let first = prims.len();
+            prims.extend(prims_of(i, o));
+            let shapes = &prims[first..];
+            // A post or a box rides its body (moving or fixed); a wall's segments and
+            // joints sit on one fixed body at the origin.
+            let (body, placed) = match o {
+                Obstacle::Wall { .. } => (RigidBodyBuilder::fixed(), true),
+                Obstacle::Circle { motion, .. } | Obstacle::Box { motion, .. } => {
+                    let pose = shapes.first().map_or(Pose::IDENTITY, pose_of);
+                    (body_for(motion).pose(pose), false)
                 }
             };
             let handle = physics.insert_body(body);
             let colliders = shapes
-                .into_iter()
-                .map(|c| {
-                    physics.colliders.insert_with_parent(
-                        c.user_data(tag),
-                        handle,
-                        &mut physics.bodies,
-                    )
+                .iter()
+                .map(|p| {
+                    let c = collider_of(p).user_data(i as u128);
+                    let c = if placed { c.position(pose_of(p)) } else { c };
+                    physics
+                        .colliders
+                        .insert_with_parent(c, handle, &mut physics.bodies)
                 })
                 .collect();
             bodies.push(Body {
                 spec: o.clone(),
                 handle,
                 colliders,
+                prims: first..prims.len(),
             });
         }
-        let prims = obstacles
-            .iter()
-            .enumerate()
-            .flat_map(|(i, o)| prims_of(i, o))
-            .collect();
         let mut world = World {
             physics,
             bodies,
@@ -201,7 +158,7 @@ impl World {
     pub fn set_time(&mut self, t: f64) {
         self.time = t;
         let mut moved = false;
-        for (i, b) in self.bodies.iter().enumerate() {
+        for b in &self.bodies {
             let (x0, y0, heading, motion) = match &b.spec {
                 Obstacle::Circle { x, y, motion, .. } => (*x, *y, 0.0, motion),
                 Obstacle::Box {
@@ -217,7 +174,7 @@ impl World {
                 continue;
             }
             let (x, y) = position_at(x0, y0, motion, t);
-            for p in self.prims.iter_mut().filter(|p| p.obstacle == i) {
+            for p in self.prims.get_mut(b.prims.clone()).into_iter().flatten() {
                 (p.x, p.y) = (x, y);
             }
             if let Some(body) = self.physics.bodies.get_mut(b.handle) {
@@ -288,7 +245,22 @@ impl World {
     }
 }
 
-/// The shapes of obstacle `i` for the ray caster, as [`World::new`] builds its colliders.
+/// A shape's pose for rapier.
+fn pose_of(p: &Prim) -> Pose {
+    Pose::new(vec2(p.x, p.y), p.heading as Real)
+}
+
+/// A shape's collider in its own frame.
+fn collider_of(p: &Prim) -> ColliderBuilder {
+    match p.form {
+        Form::Circle { r } => ColliderBuilder::ball(r as Real),
+        Form::Rect { hx, hy } => ColliderBuilder::cuboid(hx as Real, hy as Real),
+    }
+}
+
+/// The shapes of obstacle `i`: a box per wall segment (flat, exact ends) and a post at
+/// every inner joint so corners are closed. Both the ray caster and rapier's
+/// colliders are built from them.
 fn prims_of(i: usize, o: &Obstacle) -> Vec<Prim> {
     match o {
         Obstacle::Circle { x, y, radius, .. } => vec![Prim::circle(i, *x, *y, *radius)],

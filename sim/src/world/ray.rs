@@ -28,7 +28,8 @@ pub struct Prim {
     /// Centre, world frame, metres.
     pub x: f64,
     pub y: f64,
-    /// Heading's cosine and sine (rectangles).
+    /// Heading, radians, and its cosine and sine (rectangles).
+    pub heading: f64,
     pub cos: f64,
     pub sin: f64,
     /// Radius of the bounding circle about the centre.
@@ -42,6 +43,7 @@ impl Prim {
             form: Form::Circle { r },
             x,
             y,
+            heading: 0.0,
             cos: 1.0,
             sin: 0.0,
             bound: r,
@@ -55,6 +57,7 @@ impl Prim {
             form: Form::Rect { hx, hy },
             x,
             y,
+            heading,
             cos,
             sin,
             bound: hx.hypot(hy),
@@ -235,7 +238,7 @@ mod tests {
     fn parry_toi(p: &Prim, o: (f64, f64), d: (f64, f64), max: f64) -> Option<f64> {
         let v = |x: f64, y: f64| Vector::new(x as Real, y as Real);
         let ray = Ray::new(v(o.0, o.1), v(d.0, d.1));
-        let pose = Pose::new(v(p.x, p.y), p.sin.atan2(p.cos) as Real);
+        let pose = Pose::new(v(p.x, p.y), p.heading as Real);
         match p.form {
             Form::Circle { r } => Ball::new(r as Real).cast_ray(&pose, &ray, max as Real, true),
             Form::Rect { hx, hy } => {
