@@ -504,7 +504,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             final_state: self.vehicle,
             path_length: self.vehicle.odometer,
             distance_to_goal: self.distance_to_goal(),
-            min_clearance: self.clearances.min().to_vec(),
+            min_clearance: self.clearances.resolved(&self.world),
             max_steer_deg: self.max_steer_deg,
             max_steer_rate_deg_s: self.max_steer_rate_deg_s,
             steering_can,

@@ -200,8 +200,13 @@ impl World {
 
     fn footprint(cfg: &VehicleConfig, state: &VehicleState) -> (Pose, Cuboid) {
         let (cx, cy) = state.footprint_center(cfg);
+        Self::footprint_at(cfg, cx, cy, state.theta)
+    }
+
+    /// The footprint centred at `(cx, cy)` with heading `theta`.
+    fn footprint_at(cfg: &VehicleConfig, cx: f64, cy: f64, theta: f64) -> (Pose, Cuboid) {
         (
-            Pose::new(vec2(cx, cy), state.theta as Real),
+            Pose::new(vec2(cx, cy), theta as Real),
             Cuboid::new(Vector::new(
                 (cfg.length / 2.0) as Real,
                 (cfg.width / 2.0) as Real,
@@ -316,8 +321,7 @@ mod tests {
         // The rear axle at (17.5, 8): the footprint reaches into the post at (19, 8).
         assert_eq!(w.footprint_hits(&s.vehicle, &at(17.5, 8.0)), vec![0]);
         // Clearance to the post: the front bumper at x = 2.025 from the axle.
-        let c = Clearances::new(&w, &s.vehicle, &at(10.0, 8.0));
-        let c = c.min();
+        let c = Clearances::new(&w, &s.vehicle, &at(10.0, 8.0)).resolved(&w);
         let front = 10.0 + s.vehicle.length - s.vehicle.rear_overhang;
         assert!((c[0] - (19.0 - 3.0 - front)).abs() < 1e-4, "{c:?}");
     }
