@@ -208,13 +208,32 @@ pub fn interval(p: &Prim, ox: f64, oy: f64, start: f64, range_max: f64) -> Optio
     }
     let mid = (cy.atan2(cx) - start).rem_euclid(TAU);
     let d = d2.sqrt();
-    // A hair wider than the exact half-angle, so rounding never drops a grazing beam.
-    let half = if d <= p.bound {
-        std::f64::consts::PI
-    } else {
-        (p.bound / d).asin() + 1e-9
+    let half = match p.form {
+        Form::Rect { hx, hy } if d <= p.bound => rect_half_angle(p, cx, cy, hx, hy),
+        _ if d <= p.bound => std::f64::consts::PI,
+        _ => (p.bound / d).asin(),
     };
-    Some((mid, half))
+    // A hair wider than the exact half-angle, so rounding never drops a grazing beam.
+    Some((mid, half + 1e-9))
+}
+
+/// The half-angle about the direction to its centre `(cx, cy)` that a rectangle
+/// subtends from the origin: its corners' largest angle from that direction (a wall
+/// beside the scanner is inside its own bounding circle, but spans under pi), or pi
+/// when the origin is inside it.
+fn rect_half_angle(p: &Prim, cx: f64, cy: f64, hx: f64, hy: f64) -> f64 {
+    let (px, py) = (cx * p.cos + cy * p.sin, cy * p.cos - cx * p.sin);
+    if px.abs() <= hx && py.abs() <= hy {
+        return std::f64::consts::PI;
+    }
+    [(hx, hy), (hx, -hy), (-hx, hy), (-hx, -hy)]
+        .into_iter()
+        .map(|(lx, ly)| {
+            // The corner from the origin, in the world frame.
+            let (vx, vy) = (cx + lx * p.cos - ly * p.sin, cy + lx * p.sin + ly * p.cos);
+            (cx * vy - cy * vx).atan2(cx * vx + cy * vy).abs()
+        })
+        .fold(0.0, f64::max)
 }
 
 /// The nearest hit of one ray (any direction, every shape in range).
@@ -340,7 +359,13 @@ mod tests {
     #[test]
     fn the_broad_phase_scan_equals_every_ray_against_every_shape() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let prims: Vec<Prim> = (0..60).map(|k| random_prim(&mut rng, k)).collect();
+        let mut prims: Vec<Prim> = (0..60).map(|k| random_prim(&mut rng, k)).collect();
+        // Long walls, often with the scanner inside their bounding circle.
+        for k in 60..70 {
+            let (x, y) = (rng.random_range(-10.0..10.0), rng.random_range(-10.0..10.0));
+            let h = rng.random_range(-4.0..4.0);
+            prims.push(Prim::rect(k, x, y, h, rng.random_range(10.0..30.0), 0.15));
+        }
         let (mut hits, mut found) = (Vec::new(), 0);
         for fov in [270.0f64, 360.0, 180.0] {
             let step = 0.5f64.to_radians();
