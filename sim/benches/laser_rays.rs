@@ -1,7 +1,8 @@
 //! Laser ray casting throughput, one core: `cargo bench -p ugv-sim --bench laser_rays`.
 //!
-//! For each scene: raw `World::cast_ray` calls per second, and whole LMS111 scans
-//! (541 beams, noise and dropout draws included) per second, as rays per second.
+//! For each scene: raw `World::cast_ray` calls per second (one ray against every
+//! shape, no broad phase), and whole LMS111 scans (541 beams through the scan's broad
+//! phase, noise draws included) per second, as rays per second.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -107,6 +108,19 @@ fn main() {
         start.heading(),
     );
     bench("paper (facing the post)", &paper, 8.0, 8.0, 0.0);
+    // Two scenes of the suite at their start poses: 25 posts, and walls.
+    for (name, file) in [
+        ("25 posts (route-south)", "30-route-south.toml"),
+        ("walls (corridor)", "11-corridor.toml"),
+    ] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenarios/suite")
+            .join(file);
+        match Scenario::load(&path) {
+            Ok(s) => bench(name, &s, s.start.x, s.start.y, s.start.heading()),
+            Err(e) => eprintln!("{name}: {e}"),
+        }
+    }
     let crowded = crowded();
     bench("200 obstacles", &crowded, 0.0, 0.0, 0.0);
 }

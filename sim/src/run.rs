@@ -19,7 +19,7 @@ use crate::measure::Jitter;
 use crate::scenario::Scenario;
 use crate::vehicle::VehicleState;
 use crate::verdict::route::{RouteCheck, RouteReport};
-use crate::world::World;
+use crate::world::{Clearances, World};
 use firmware_bridge::laser::LaserFrame;
 
 /// Why a run could not go on.
@@ -89,7 +89,7 @@ pub struct Sim<B> {
     dt: f64,
     tick: u64,
     /// Closest approach of the footprint to each obstacle so far.
-    pub min_clearance: Vec<f64>,
+    clearances: Clearances,
     pub max_steer_deg: f64,
     pub max_steer_rate_deg_s: f64,
     /// How late the ticks came (HIL), seconds.
@@ -167,7 +167,7 @@ impl<B: Can + QueueDrops> Sim<B> {
     pub fn new(scenario: Scenario, steering: CanPort<B>, throttle: CanPort<B>) -> Sim<B> {
         let world = World::new(&scenario.obstacles);
         let vehicle = VehicleState::at(&scenario.start);
-        let min_clearance = world.clearances(&scenario.vehicle, &vehicle);
+        let clearances = Clearances::new(&world, &scenario.vehicle, &vehicle);
         let sections = scenario.ecu_sections();
         let station = |kind, device: &EcuDevice, port| Station::new(kind, device, &sections, port);
         Sim {
@@ -177,7 +177,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             tick: 0,
             world,
             vehicle,
-            min_clearance,
+            clearances,
             max_steer_deg: 0.0,
             max_steer_rate_deg_s: 0.0,
             lateness: Vec::new(),
@@ -306,7 +306,9 @@ impl<B: Can + QueueDrops> Sim<B> {
             && now + 1e-9 >= self.next_scan
         {
             let v = &self.vehicle;
-            let scan = Box::new(laser.scan(&self.world, now, v.x, v.y, v.theta));
+            // Written in place into the frame that goes out.
+            let mut scan = Box::<LaserFrame>::default();
+            laser.scan_into(&self.world, now, v.x, v.y, v.theta, &mut scan);
             self.outputs.laser = faults.laser(now, Some(scan));
             self.next_scan = firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());
         }
@@ -327,13 +329,12 @@ impl<B: Can + QueueDrops> Sim<B> {
         if let Some(r) = &mut self.route {
             r.update(now, self.vehicle.x, self.vehicle.y);
         }
-        // One distance query per obstacle gives both the clearance bookkeeping and the
-        // collision verdict (a distance of zero is a touch or an overlap).
-        let clear = self.world.clearances(&self.scenario.vehicle, &self.vehicle);
-        for (m, c) in self.min_clearance.iter_mut().zip(&clear) {
-            *m = m.min(*c);
-        }
-        if let Some(i) = clear.iter().position(|c| *c <= 0.0) {
+        // The distances that could have changed give both the clearance bookkeeping and
+        // the collision verdict (a distance of zero is a touch or an overlap).
+        let touched = self
+            .clearances
+            .update(&self.world, &self.scenario.vehicle, &self.vehicle);
+        if let Some(i) = touched {
             return Some(Outcome::Collision {
                 time: now,
                 obstacle: i,
@@ -503,7 +504,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             final_state: self.vehicle,
             path_length: self.vehicle.odometer,
             distance_to_goal: self.distance_to_goal(),
-            min_clearance: self.min_clearance.clone(),
+            min_clearance: self.clearances.resolved(&self.world),
             max_steer_deg: self.max_steer_deg,
             max_steer_rate_deg_s: self.max_steer_rate_deg_s,
             steering_can,

@@ -13,18 +13,28 @@ use rapier2d::prelude::*;
 use crate::scenario::schema::{Motion, Obstacle, VehicleConfig};
 use crate::vehicle::VehicleState;
 
+mod clearance;
+pub mod ray;
+
+pub use clearance::Clearances;
+use ray::{Fan, Form, Hit, Prim};
+
 /// One obstacle of the scenario in the physics world.
 #[derive(Debug)]
 struct Body {
     spec: Obstacle,
     handle: RigidBodyHandle,
     colliders: Vec<ColliderHandle>,
+    /// Its shapes in [`World::prims`].
+    prims: std::ops::Range<usize>,
 }
 
 /// The physics world of one run.
 pub struct World {
     physics: PhysicsWorld,
     bodies: Vec<Body>,
+    /// The same shapes in f64 for the laser ([`ray`]), in the order of `bodies`.
+    prims: Vec<Prim>,
     time: f64,
 }
 
@@ -97,81 +107,42 @@ impl World {
         let mut physics = PhysicsWorld::new();
         physics.gravity = Vector::ZERO;
         let mut bodies = Vec::with_capacity(obstacles.len());
+        let mut prims = Vec::with_capacity(obstacles.len());
         for (i, o) in obstacles.iter().enumerate() {
-            let tag = i as u128;
-            let (body, shapes): (RigidBodyBuilder, Vec<ColliderBuilder>) = match o {
-                Obstacle::Circle {
-                    x,
-                    y,
-                    radius,
-                    motion,
-                } => (
-                    body_for(motion).translation(vec2(*x, *y)),
-                    vec![ColliderBuilder::ball(*radius as Real)],
-                ),
-                Obstacle::Box {
-                    x,
-                    y,
-                    length,
-                    width,
-                    heading_deg,
-                    motion,
-                } => (
-                    body_for(motion)
-                        .pose(Pose::new(vec2(*x, *y), heading_deg.to_radians() as Real)),
-                    vec![ColliderBuilder::cuboid(
-                        (*length / 2.0) as Real,
-                        (*width / 2.0) as Real,
-                    )],
-                ),
-                Obstacle::Wall { points, thickness } => {
-                    // One box per segment (flat, exact ends) and a post at every inner
-                    // joint so corners are closed.
-                    let mut shapes = Vec::new();
-                    for w in points.windows(2) {
-                        let (a, b) = (w[0], w[1]);
-                        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-                        let len = (dx * dx + dy * dy).sqrt();
-                        shapes.push(
-                            ColliderBuilder::cuboid(
-                                (len / 2.0) as Real,
-                                (*thickness / 2.0) as Real,
-                            )
-                            .position(Pose::new(
-                                vec2((a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0),
-                                dy.atan2(dx) as Real,
-                            )),
-                        );
-                    }
-                    for p in points.iter().skip(1).take(points.len().saturating_sub(2)) {
-                        shapes.push(
-                            ColliderBuilder::ball((*thickness / 2.0) as Real)
-                                .position(Pose::from_translation(vec2(p[0], p[1]))),
-                        );
-                    }
-                    (RigidBodyBuilder::fixed(), shapes)
+            let first = prims.len();
+            prims.extend(prims_of(i, o));
+            let shapes = &prims[first..];
+            // A post or a box rides its body (moving or fixed); a wall's segments and
+            // joints sit on one fixed body at the origin.
+            let (body, placed) = match o {
+                Obstacle::Wall { .. } => (RigidBodyBuilder::fixed(), true),
+                Obstacle::Circle { motion, .. } | Obstacle::Box { motion, .. } => {
+                    let pose = shapes.first().map_or(Pose::IDENTITY, pose_of);
+                    (body_for(motion).pose(pose), false)
                 }
             };
             let handle = physics.insert_body(body);
             let colliders = shapes
-                .into_iter()
-                .map(|c| {
-                    physics.colliders.insert_with_parent(
-                        c.user_data(tag),
-                        handle,
-                        &mut physics.bodies,
-                    )
+                .iter()
+                .map(|p| {
+                    let c = collider_of(p).user_data(i as u128);
+                    let c = if placed { c.position(pose_of(p)) } else { c };
+                    physics
+                        .colliders
+                        .insert_with_parent(c, handle, &mut physics.bodies)
                 })
                 .collect();
             bodies.push(Body {
                 spec: o.clone(),
                 handle,
                 colliders,
+                prims: first..prims.len(),
             });
         }
         let mut world = World {
             physics,
             bodies,
+            prims,
             time: 0.0,
         };
         world.refresh();
@@ -203,6 +174,9 @@ impl World {
                 continue;
             }
             let (x, y) = position_at(x0, y0, motion, t);
+            for p in self.prims.get_mut(b.prims.clone()).into_iter().flatten() {
+                (p.x, p.y) = (x, y);
+            }
             if let Some(body) = self.physics.bodies.get_mut(b.handle) {
                 body.set_position(Pose::new(vec2(x, y), heading as Real), true);
                 moved = true;
@@ -211,13 +185,6 @@ impl World {
         if moved {
             self.refresh();
         }
-    }
-
-    fn obstacle_of(&self, handle: ColliderHandle) -> Option<usize> {
-        self.physics
-            .colliders
-            .get(handle)
-            .map(|c| c.user_data as usize)
     }
 
     fn hits(&self, pose: Pose, shape: &dyn Shape) -> Vec<usize> {
@@ -233,8 +200,13 @@ impl World {
 
     fn footprint(cfg: &VehicleConfig, state: &VehicleState) -> (Pose, Cuboid) {
         let (cx, cy) = state.footprint_center(cfg);
+        Self::footprint_at(cfg, cx, cy, state.theta)
+    }
+
+    /// The footprint centred at `(cx, cy)` with heading `theta`.
+    fn footprint_at(cfg: &VehicleConfig, cx: f64, cy: f64, theta: f64) -> (Pose, Cuboid) {
         (
-            Pose::new(vec2(cx, cy), state.theta as Real),
+            Pose::new(vec2(cx, cy), theta as Real),
             Cuboid::new(Vector::new(
                 (cfg.length / 2.0) as Real,
                 (cfg.width / 2.0) as Real,
@@ -256,31 +228,75 @@ impl World {
         )
     }
 
-    /// Distance from the footprint to each obstacle (0 when touching or overlapping).
-    pub fn clearances(&self, cfg: &VehicleConfig, state: &VehicleState) -> Vec<f64> {
-        let (pose, shape) = Self::footprint(cfg, state);
-        self.bodies
-            .iter()
-            .map(|b| {
-                b.colliders
-                    .iter()
-                    .filter_map(|h| self.physics.colliders.get(*h))
-                    .filter_map(|c| {
-                        parry::query::distance(&pose, &shape, c.position(), c.shape()).ok()
-                    })
-                    .map(|d| f64::from(d.distance))
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .collect()
+    /// Distance from a shape at `pose` to one collider (0 when touching or
+    /// overlapping), or `None` when it cannot be measured.
+    fn distance(&self, collider: ColliderHandle, pose: &Pose, shape: &Cuboid) -> Option<f64> {
+        let c = self.physics.colliders.get(collider)?;
+        parry::query::distance(pose, shape, c.position(), c.shape())
+            .ok()
+            .map(|d| f64::from(d.distance))
     }
 
     /// Cast a ray from `(x, y)` in direction `angle` (radians, world frame) up to
     /// `max_range`: the obstacle hit and the range, or `None` for no return.
     pub fn cast_ray(&self, x: f64, y: f64, angle: f64, max_range: f64) -> Option<(usize, f64)> {
-        let ray = Ray::new(vec2(x, y), vec2(angle.cos(), angle.sin()));
-        self.physics
-            .cast_ray(&ray, max_range as Real, true, QueryFilter::default())
-            .and_then(|(h, toi)| Some((self.obstacle_of(h)?, f64::from(toi))))
+        ray::cast(&self.prims, x, y, angle, max_range).map(|(t, i)| (i, t))
+    }
+
+    /// Every beam of `fan` from the scanner pose `(x, y, heading)` up to `max_range`:
+    /// `hits[i]` is beam `i`'s range and obstacle (`f64::INFINITY` for no return).
+    pub fn scan(&self, pose: (f64, f64, f64), fan: &Fan, max_range: f64, hits: &mut Vec<Hit>) {
+        ray::scan(&self.prims, fan, pose, max_range, hits);
+    }
+}
+
+/// A shape's pose for rapier.
+fn pose_of(p: &Prim) -> Pose {
+    Pose::new(vec2(p.x, p.y), p.heading as Real)
+}
+
+/// A shape's collider in its own frame.
+fn collider_of(p: &Prim) -> ColliderBuilder {
+    match p.form {
+        Form::Circle { r } => ColliderBuilder::ball(r as Real),
+        Form::Rect { hx, hy } => ColliderBuilder::cuboid(hx as Real, hy as Real),
+    }
+}
+
+/// The shapes of obstacle `i`: a box per wall segment (flat, exact ends) and a post at
+/// every inner joint so corners are closed. Both the ray caster and rapier's
+/// colliders are built from them.
+fn prims_of(i: usize, o: &Obstacle) -> Vec<Prim> {
+    match o {
+        Obstacle::Circle { x, y, radius, .. } => vec![Prim::circle(i, *x, *y, *radius)],
+        Obstacle::Box {
+            x,
+            y,
+            length,
+            width,
+            heading_deg,
+            ..
+        } => vec![Prim::rect(
+            i,
+            *x,
+            *y,
+            heading_deg.to_radians(),
+            length / 2.0,
+            width / 2.0,
+        )],
+        Obstacle::Wall { points, thickness } => {
+            let segments = points.windows(2).map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let (mx, my) = ((a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0);
+                let half = (dx * dx + dy * dy).sqrt() / 2.0;
+                Prim::rect(i, mx, my, dy.atan2(dx), half, thickness / 2.0)
+            });
+            let joints = points.iter().skip(1).take(points.len().saturating_sub(2));
+            segments
+                .chain(joints.map(|p| Prim::circle(i, p[0], p[1], thickness / 2.0)))
+                .collect()
+        }
     }
 }
 
@@ -305,7 +321,7 @@ mod tests {
         // The rear axle at (17.5, 8): the footprint reaches into the post at (19, 8).
         assert_eq!(w.footprint_hits(&s.vehicle, &at(17.5, 8.0)), vec![0]);
         // Clearance to the post: the front bumper at x = 2.025 from the axle.
-        let c = w.clearances(&s.vehicle, &at(10.0, 8.0));
+        let c = Clearances::new(&w, &s.vehicle, &at(10.0, 8.0)).resolved(&w);
         let front = 10.0 + s.vehicle.length - s.vehicle.rear_overhang;
         assert!((c[0] - (19.0 - 3.0 - front)).abs() < 1e-4, "{c:?}");
     }

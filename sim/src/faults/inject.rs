@@ -479,8 +479,17 @@ impl Injector {
                 _ => {}
             }
         }
-        if !frozen {
-            self.last_scan = Some(frame.clone());
+        // Only a plan that can freeze the laser needs the last scan kept.
+        if !frozen
+            && self
+                .faults
+                .iter()
+                .any(|f| matches!(f.kind, FaultKind::LaserFrozen))
+        {
+            match &mut self.last_scan {
+                Some(last) => last.clone_from(&frame),
+                None => self.last_scan = Some(frame.clone()),
+            }
         }
         Some(frame)
     }

@@ -30,20 +30,29 @@
 //!
 //! # Determinism
 //!
-//! The noise stream is ChaCha8 seeded from the scenario's `sim.seed` mixed with
-//! [`NOISE_SOURCE`], so it differs from other devices' streams and is identical for the
-//! same seed. Every beam draws the same number of random numbers whatever it hits, so
-//! the stream stays aligned across scans and scenes.
+//! The noise stream is xoshiro256++ ([`noise`]) seeded from the scenario's `sim.seed`
+//! mixed with [`NOISE_SOURCE`], so it differs from other devices' streams and is
+//! identical for the same seed. Every beam draws the same numbers whatever it hits (a
+//! normal, and a uniform for the dropout when `dropout_probability` is above 0), so the
+//! stream stays aligned across scans and scenes.
+//!
+//! # Ray casting
+//!
+//! The beams' directions are computed once ([`Fan`]) and turned by the scanner's
+//! heading per scan; the world's ray caster ([`crate::world::ray`]) tests each shape
+//! within range only against the beams its bounding circle subtends.
 
 use firmware_bridge::laser::{LASER_FRAME_VERSION, LaserFrame};
-use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
+use rand::RngExt;
 use rand_distr::StandardNormal;
 
 use super::FieldError;
 use crate::scenario::schema::Obstacle;
 use crate::world::World;
+use crate::world::ray::{Fan, Hit};
 
 mod config;
+mod noise;
 
 pub use config::{LaserConfig, LaserProfile, LaserSpec};
 
@@ -66,13 +75,8 @@ impl From<FieldError> for LaserDeviceError {
 /// The noise seed of the laser for a scenario seed: SplitMix64 of the seed mixed with
 /// [`NOISE_SOURCE`], so that devices sharing `sim.seed` get unrelated streams.
 pub fn noise_seed(sim_seed: u64) -> u64 {
-    fn splitmix64(mut z: u64) -> u64 {
-        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    splitmix64(sim_seed ^ splitmix64(NOISE_SOURCE))
+    let mix = |mut z: u64| noise::splitmix64(&mut z);
+    mix(sim_seed ^ mix(NOISE_SOURCE))
 }
 
 /// Nanoseconds since the UNIX epoch of `epoch_s + t` (both seconds), saturating.
@@ -92,11 +96,13 @@ pub struct LaserDevice {
     spec: LaserSpec,
     /// Intensity of a return from obstacle `i` of the scenario.
     intensity: Vec<f32>,
-    rng: ChaCha8Rng,
+    rng: noise::Noise,
     epoch_ns: u64,
     sequence: u64,
-    /// Beam angles relative to the forward axis, radians.
-    angles: Vec<f64>,
+    /// The beams' directions relative to the forward axis.
+    fan: Fan,
+    /// Each beam's nearest hit in the last scan (kept to reuse its memory).
+    hits: Vec<Hit>,
 }
 
 impl LaserDevice {
@@ -119,18 +125,20 @@ impl LaserDevice {
                 Obstacle::Wall { .. } => config.intensity_wall,
             } as f32)
             .collect();
-        let step = spec.resolution_deg.to_radians();
-        let angles = (0..spec.beams())
-            .map(|i| spec.angle_min() + i as f64 * step)
-            .collect();
+        let fan = Fan::new(
+            spec.angle_min(),
+            spec.resolution_deg.to_radians(),
+            spec.beams(),
+        );
         Ok(LaserDevice {
             config: config.clone(),
             spec,
             intensity,
-            rng: ChaCha8Rng::seed_from_u64(noise_seed(sim_seed)),
+            rng: noise::Noise::new(noise_seed(sim_seed)),
             epoch_ns,
             sequence: 0,
-            angles,
+            fan,
+            hits: Vec::new(),
         })
     }
 
@@ -179,11 +187,29 @@ impl LaserDevice {
         theta: f64,
         frame: &mut LaserFrame,
     ) {
-        let (sx, sy, heading) = self.scanner_pose(x, y, theta);
+        let pose = self.scanner_pose(x, y, theta);
+        self.header(t, frame);
+        let mut hits = std::mem::take(&mut self.hits);
+        world.scan(pose, &self.fan, self.spec.range_max, &mut hits);
+        let n = hits.len();
+        for ((hit, range), intensity) in hits
+            .iter()
+            .zip(&mut frame.ranges)
+            .zip(&mut frame.intensities)
+        {
+            (*range, *intensity) = self.measure(*hit);
+        }
+        self.hits = hits;
+        frame.ranges[n..].fill(0.0);
+        frame.intensities[n..].fill(0.0);
+        self.sequence += 1;
+    }
+
+    /// The frame's header for a scan at `t`.
+    fn header(&self, t: f64, frame: &mut LaserFrame) {
         let s = &self.spec;
-        let n = self.angles.len();
         frame.version = LASER_FRAME_VERSION;
-        frame.count = n as u32;
+        frame.count = self.fan.len() as u32;
         frame.sequence = self.sequence;
         frame.stamp_ns = unix_ns(self.epoch_ns, t);
         frame.angle_min = s.angle_min() as f32;
@@ -192,33 +218,25 @@ impl LaserDevice {
         frame.scan_time = s.scan_time() as f32;
         frame.range_min = s.range_min as f32;
         frame.range_max = s.range_max as f32;
+    }
+
+    /// One beam's range and intensity from its true hit: noise, dropout, limits.
+    fn measure(&mut self, (r, obstacle): Hit) -> (f32, f32) {
+        let s = &self.spec;
         let p_drop = self.config.dropout_probability;
-        for (i, angle) in self.angles.iter().enumerate() {
-            // Always two draws per beam, whatever it hits.
-            let noise: f64 = self.rng.sample(StandardNormal);
-            let drop: f64 = self.rng.random();
-            let (range, intensity) = match world.cast_ray(sx, sy, heading + angle, s.range_max) {
-                Some((obstacle, r)) if r >= s.range_min => {
-                    if drop < p_drop {
-                        (f32::NAN, 0.0)
-                    } else {
-                        let measured =
-                            (r + noise * s.range_noise_sigma).clamp(s.range_min, s.range_max);
-                        (
-                            measured as f32,
-                            self.intensity.get(obstacle).copied().unwrap_or(0.0),
-                        )
-                    }
-                }
-                // Nothing within range_max, or closer than range_min: no return.
-                _ => (f32::INFINITY, 0.0),
-            };
-            frame.ranges[i] = range;
-            frame.intensities[i] = intensity;
+        // The same draws per beam, whatever it hits.
+        let noise: f64 = self.rng.sample(StandardNormal);
+        let dropped = p_drop > 0.0 && self.rng.random::<f64>() < p_drop;
+        if !(r >= s.range_min && r <= s.range_max) {
+            // Nothing within range_max, or closer than range_min: no return.
+            (f32::INFINITY, 0.0)
+        } else if dropped {
+            (f32::NAN, 0.0)
+        } else {
+            let measured = (r + noise * s.range_noise_sigma).clamp(s.range_min, s.range_max);
+            let intensity = self.intensity.get(obstacle).copied().unwrap_or(0.0);
+            (measured as f32, intensity)
         }
-        frame.ranges[n..].fill(0.0);
-        frame.intensities[n..].fill(0.0);
-        self.sequence += 1;
     }
 }
 
