@@ -46,6 +46,11 @@ const GOALS_SEARCHED: usize = 3;
 /// The manoeuvre being followed is kept while it clears every obstacle by the margin
 /// less this, metres.
 pub const HOLD_SLACK: f64 = 0.1;
+/// ... along this many samples of it ahead of the car (3 m, well beyond the stopping
+/// distance at a manoeuvre's pace): a place farther on that the laser now shows a few
+/// centimetres too tight, seen from afar, is driven towards and looked at again from
+/// nearer, not given up at once for a search from here.
+const HOLD_AHEAD: usize = 30;
 
 /// One manoeuvre search: from the car's pose to the first of `goals` it reaches, among
 /// the obstacles, the car's rectangle grown by the manoeuvre margin.
@@ -66,6 +71,10 @@ pub struct ManoeuvreRequest {
     /// The cells beams returned from in the window ([`SeenSpace::hits_in`]): obstacles
     /// the laser saw that may be out of its view now, each a disc over its cell.
     pub remembered: Vec<[f64; 2]>,
+    /// The manoeuvre being followed is partial and the car has driven on along it
+    /// ([`Following::look_again`]): search again while it holds, and take a complete
+    /// manoeuvre if one is found now.
+    pub look_again: bool,
 }
 
 /// The obstacles as discs: static ones as they are, moving ones swept along their
@@ -154,8 +163,8 @@ impl ManoeuvreRequest {
 
     /// Whether the manoeuvre being followed still clears every obstacle by the margin
     /// less [`HOLD_SLACK`] (perceived outlines shift from scan to scan; a manoeuvre
-    /// dropped for a few centimetres would be searched anew, and the car would shuffle),
-    /// with the car within [`OFF_PATH`] of it.
+    /// dropped for a few centimetres would be searched anew, and the car would shuffle)
+    /// over the next [`HOLD_AHEAD`] samples, with the car within [`OFF_PATH`] of it.
     pub fn following_holds(&self) -> bool {
         let field = ManoeuvreRequest {
             footprint: Footprint {
@@ -171,7 +180,8 @@ impl ManoeuvreRequest {
                 .iter()
                 .take(OFF_PATH_LOOK)
                 .any(|p| (p.x - self.start[0]).hypot(p.y - self.start[1]) <= OFF_PATH);
-            (on || m.points.is_empty()) && m.points.iter().all(|p| field.passable(p))
+            (on || m.points.is_empty())
+                && m.points.iter().take(HOLD_AHEAD).all(|p| field.passable(p))
         })
     }
 

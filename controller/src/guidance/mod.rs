@@ -725,6 +725,10 @@ impl Navigator {
                 following: self.manoeuvre.as_ref().map(manoeuvre::Following::rest),
                 seen: None,
                 remembered: Vec::new(),
+                look_again: self
+                    .manoeuvre
+                    .as_ref()
+                    .is_some_and(manoeuvre::Following::look_again),
             }
             .with_seen(&self.seen),
         )
@@ -929,8 +933,17 @@ impl Navigator {
             Ok((trajectory, mut record)) => {
                 let plan = record.manoeuvre.as_mut().and_then(|m| m.plan.take());
                 let failed = record.manoeuvre.as_ref().is_some_and(|m| m.failed);
+                let complete = record.manoeuvre.as_ref().is_some_and(|m| m.complete);
+                let searched = record.manoeuvre.as_ref().is_some_and(|m| m.expansions > 0);
                 // The manoeuvre being followed holds (a record without a new one).
                 let holds = record.kept && plan.is_none() && record.manoeuvre.is_some() && !failed;
+                if holds
+                    && searched
+                    && let Some(following) = self.manoeuvre.as_mut()
+                {
+                    // Searched again from where the car was: nothing complete yet.
+                    following.looked();
+                }
                 if trajectory.is_some() || holds || plan.is_some() {
                     self.infeasible_since = None;
                 } else {
@@ -942,7 +955,7 @@ impl Navigator {
                 self.search_effort = self.search_effort.after(failed, plan.is_some());
                 if !holds {
                     // A polynomial path, none, or a new manoeuvre: not the one followed.
-                    self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m));
+                    self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m, complete));
                 }
                 if !record.kept {
                     self.frame = outcome.frame;
@@ -968,7 +981,11 @@ impl Navigator {
 
     /// A new manoeuvre to follow, counted against `max_manoeuvres` since the last
     /// progress; None once they are spent.
-    fn count_manoeuvre(&mut self, m: manoeuvre::Manoeuvre) -> Option<manoeuvre::Following> {
+    fn count_manoeuvre(
+        &mut self,
+        m: manoeuvre::Manoeuvre,
+        complete: bool,
+    ) -> Option<manoeuvre::Following> {
         let pc = &self.cfg.planner;
         if self.progress >= self.manoeuvre_best + pc.manoeuvre_progress_m {
             self.manoeuvres = 0;
@@ -978,7 +995,7 @@ impl Navigator {
             return None;
         }
         self.manoeuvres += 1;
-        Some(manoeuvre::Following::new(m))
+        Some(manoeuvre::Following::new(m, complete))
     }
 
     /// Whether the manoeuvres allowed without progress are spent.

@@ -228,9 +228,10 @@ fn failed_search(outcome: &mut PlanOutcome, failed: ManoeuvreRecord) {
 }
 
 /// [`solve`] while a manoeuvre is followed: kept while the car's rectangle clears the
-/// rest of it (on its last segment forward, a feasible polynomial path takes over);
-/// else searched anew from where the car is, and with none found, the polynomial's
-/// outcome.
+/// rest of it (on its last segment forward, a feasible polynomial path takes over; a
+/// partial one driven on is searched again, [`ManoeuvreRequest::look_again`], and a
+/// complete manoeuvre found takes over); else searched anew from where the car is, and
+/// with none found, the polynomial's outcome.
 fn solve_following(req: &PlanRequest, m: &ManoeuvreRequest) -> PlanOutcome {
     if m.following_holds() {
         if req.hand_back {
@@ -239,10 +240,24 @@ fn solve_following(req: &PlanRequest, m: &ManoeuvreRequest) -> PlanOutcome {
                 return outcome;
             }
         }
+        // A partial manoeuvre driven on: a complete one found from here takes over.
+        let mut looked = 0;
+        if m.look_again {
+            let (found, expansions) = m.plan(&m.field());
+            match found {
+                Ok(planned) if planned.complete => {
+                    return found_manoeuvre(req, planned, expansions);
+                }
+                _ => looked = expansions.max(1),
+            }
+        }
         let (_, mut record) = record(req.time, &req.frame, None, false);
         record.kept = true;
         record.feasible = true;
-        record.manoeuvre = Some(ManoeuvreRecord::default());
+        record.manoeuvre = Some(ManoeuvreRecord {
+            expansions: looked,
+            ..ManoeuvreRecord::default()
+        });
         return PlanOutcome {
             time: req.time,
             frame: req.frame,
@@ -266,27 +281,32 @@ fn manoeuvre(
     field: &Field,
 ) -> Result<PlanOutcome, ManoeuvreRecord> {
     let (found, expansions) = m.plan(field);
-    let Ok(Planned {
-        manoeuvre: plan,
-        complete,
-    }) = found
-    else {
+    let Ok(planned) = found else {
         return Err(ManoeuvreRecord {
             expansions,
             failed: true,
             ..ManoeuvreRecord::default()
         });
     };
+    Ok(found_manoeuvre(req, planned, expansions))
+}
+
+/// The outcome of a search that found `planned` after `expansions`.
+fn found_manoeuvre(req: &PlanRequest, planned: Planned, expansions: usize) -> PlanOutcome {
+    let Planned {
+        manoeuvre: plan,
+        complete,
+    } = planned;
     let (_, mut record) = record(req.time, &req.frame, None, false);
     record.feasible = true;
     record.goal_blocked = req.goal_blocked;
     record.path = plan.points.iter().map(|p| [p.x, p.y]).collect();
     record.manoeuvre = Some(ManoeuvreRecord::new(plan, expansions, complete));
-    Ok(PlanOutcome {
+    PlanOutcome {
         time: req.time,
         frame: req.frame,
         result: Ok((None, record)),
-    })
+    }
 }
 
 /// The paper's polynomial: [`solve_in_order`], and whether the path being followed is

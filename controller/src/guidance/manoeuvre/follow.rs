@@ -37,15 +37,23 @@ pub struct Command {
     pub inputs: FollowInputs,
 }
 
+/// A partial manoeuvre is searched again (a complete one found then takes over) each
+/// time this much more of it has been driven, metres: the laser has seen more.
+const LOOK_AGAIN_M: f64 = 2.0;
+
 /// A manoeuvre being followed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Following {
     pub manoeuvre: Manoeuvre,
+    /// It reaches the search's goal (else it goes as far as was known).
+    complete: bool,
     segments: Vec<std::ops::Range<usize>>,
     /// The segment being driven.
     segment: usize,
     /// The sample nearest the car, within that segment.
     at: usize,
+    /// The sample nearest the car when it was last searched for (from).
+    looked_at: usize,
 }
 
 /// How following is tuned: speeds (magnitudes), the deceleration to stop at a segment's
@@ -62,14 +70,28 @@ pub struct Pace {
 }
 
 impl Following {
-    pub fn new(manoeuvre: Manoeuvre) -> Following {
+    /// Following `manoeuvre`, `complete` (to the search's goal) or partial.
+    pub fn new(manoeuvre: Manoeuvre, complete: bool) -> Following {
         let segments = manoeuvre.segments();
         Following {
             manoeuvre,
+            complete,
             segments,
             segment: 0,
             at: 0,
+            looked_at: 0,
         }
+    }
+
+    /// A partial manoeuvre driven [`LOOK_AGAIN_M`] further since it was searched for
+    /// (or last searched again): worth a new search, which may now reach the goal.
+    pub fn look_again(&self) -> bool {
+        !self.complete && self.at.saturating_sub(self.looked_at) as f64 * SAMPLE >= LOOK_AGAIN_M
+    }
+
+    /// A new search from where the car is found no complete manoeuvre: this one goes on.
+    pub fn looked(&mut self) {
+        self.looked_at = self.at;
     }
 
     /// The rest of the manoeuvre, from the sample nearest the car.
@@ -216,7 +238,7 @@ mod tests {
     /// As [`drive`], the road wheels starting at `phi` and turning at most `rate`
     /// radians per second.
     fn drive_steering(m: Manoeuvre, limit: usize, phi: f64, rate: f64) -> (Following, Vec<Pose>) {
-        let mut f = Following::new(m);
+        let mut f = Following::new(m, true);
         let mut pose = Pose {
             x: 0.0,
             y: 0.0,
@@ -327,5 +349,35 @@ mod tests {
             "{:?}",
             poses[moved_at]
         );
+    }
+
+    #[test]
+    fn a_partial_manoeuvre_is_looked_at_again_every_two_metres_driven() {
+        let m = sampled([0.0; 3], &[(8.0, 0.0)]);
+        let mut partial = Following::new(m.clone(), false);
+        let complete = Following::new(m, true);
+        assert!(!partial.look_again());
+        let at = |x: f64| Pose {
+            x,
+            y: 0.0,
+            theta: 0.0,
+            v: 1.0,
+            phi: 0.0,
+        };
+        for x in [0.5, 1.0, 1.5] {
+            partial.command(&at(x), &at(x), &LAW, &PACE);
+        }
+        assert!(!partial.look_again(), "{}", partial.at);
+        partial.command(&at(2.1), &at(2.1), &LAW, &PACE);
+        assert!(partial.look_again());
+        // Looked at again: two metres more before the next.
+        partial.looked();
+        assert!(!partial.look_again());
+        for x in [2.5, 3.0, 3.5, 4.0, 4.2] {
+            partial.command(&at(x), &at(x), &LAW, &PACE);
+        }
+        assert!(partial.look_again());
+        // A complete manoeuvre is driven to its end as it is.
+        assert!(!complete.look_again());
     }
 }

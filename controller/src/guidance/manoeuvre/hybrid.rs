@@ -77,16 +77,22 @@ pub struct Goal {
 pub struct Found {
     pub manoeuvre: Manoeuvre,
     pub expansions: usize,
-    /// It ends at the goal; else it ends where the search came nearest the goal (by
-    /// the holonomic way's length) within what is known, at least [`PARTIAL_PROGRESS`]
-    /// nearer than the start: driven, it shows the laser more, and the next search
-    /// goes on.
+    /// It ends at the goal; else it ends where the search, within what is known, came
+    /// at least [`PARTIAL_PROGRESS`] nearer the goal (by the holonomic way's length),
+    /// the nearer the better but not at any cost ([`PARTIAL_COST_WEIGHT`]): driven, it
+    /// shows the laser more, and the next search goes on.
     pub complete: bool,
 }
 
 /// A partial manoeuvre must bring the car this much nearer the goal (by the holonomic
 /// way's length), metres.
 pub const PARTIAL_PROGRESS: f64 = 1.0;
+/// A partial manoeuvre ends where the holonomic way left plus this much of the cost of
+/// getting there (metres' worth: length, backwards dearer, cusps) is least: a metre
+/// nearer the goal is worth five of driving forward, or a little under two cusps, so
+/// a partial manoeuvre does not shuffle back and forth for the last few decimetres of
+/// progress (the next search, from where it ends, sees more).
+pub const PARTIAL_COST_WEIGHT: f64 = 0.2;
 
 /// Why no manoeuvre was found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -151,8 +157,9 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     let mut seq = 0u64;
     open.push(Reverse((h0.to_bits(), seq, 0usize)));
     let mut expansions = 0;
-    // The generated node nearest the goal by the holonomic way's length.
-    let mut nearest = (h0, 0usize);
+    // The partial manoeuvre's end: the generated node at least `PARTIAL_PROGRESS`
+    // nearer the goal (by the holonomic way) of the least `partial_score`.
+    let mut partial: Option<(f64, usize)> = None;
     while let Some(Reverse((_, _, id))) = open.pop() {
         let node = nodes[id];
         // A node since bettered in its cell is not expanded.
@@ -201,8 +208,9 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
             });
             let child = nodes.len() - 1;
             let way = holo.at(pose[0], pose[1]);
-            if way < nearest.0 {
-                nearest = (way, child);
+            let score = partial_score(way, g);
+            if way <= h0 - PARTIAL_PROGRESS && partial.is_none_or(|(best, _)| score < best) {
+                partial = Some((score, child));
             }
             best.set(slot, child);
             seq += 1;
@@ -210,14 +218,20 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         }
     }
     let expansions = expansions.min(s.max_expansions);
-    if nearest.0 > h0 - PARTIAL_PROGRESS {
+    let Some((_, end)) = partial else {
         return Err(Failure::Exhausted(expansions));
-    }
+    };
     Ok(Found {
-        manoeuvre: finish(&nodes, nearest.1, Vec::new(), s.step),
+        manoeuvre: finish(&nodes, end, Vec::new(), s.step),
         expansions,
         complete: false,
     })
+}
+
+/// What a partial manoeuvre ending `way` from the goal (the holonomic way's length)
+/// at cost `g` scores (the least is taken): see [`PARTIAL_COST_WEIGHT`].
+fn partial_score(way: f64, g: f64) -> f64 {
+    way + PARTIAL_COST_WEIGHT * g
 }
 
 fn at_goal(pose: [f64; 3], goal: &Goal) -> bool {

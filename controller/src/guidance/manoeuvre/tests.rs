@@ -52,6 +52,7 @@ fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Circle>) -> Manoeuvre
         following: None,
         seen: None,
         remembered: Vec::new(),
+        look_again: false,
     }
 }
 
@@ -191,4 +192,60 @@ fn goals_on_remembered_returns_are_passed_over_for_the_next_ones() {
     let m = result.expect("a manoeuvre").manoeuvre;
     let end = m.points[m.points.len() - 1];
     assert!((end.x - 11.0).hypot(end.y) <= 0.3 + 1e-6, "{end:?}");
+}
+
+#[test]
+fn a_partial_manoeuvre_does_not_shuffle_for_the_last_few_decimetres() {
+    // The goal is beyond a wall 5 m ahead whose one opening, 3 m to the left, lets the
+    // rear axle through (the holonomic way) but not the car: the search ends partial.
+    // Nosing up to the opening takes cusps; a partial manoeuvre weighs what they cost
+    // against the little they bring nearer.
+    let mut obstacles = wall((5.0, -6.0), (5.0, 2.2), 0.2);
+    obstacles.extend(wall((5.0, 3.8), (5.0, 8.0), 0.2));
+    obstacles.extend(wall((-4.0, -6.0), (5.0, -6.0), 0.2));
+    obstacles.extend(wall((-4.0, 8.0), (5.0, 8.0), 0.2));
+    obstacles.extend(wall((-4.0, -6.0), (-4.0, 8.0), 0.2));
+    let req = request([0.0, 0.0, 0.0], [12.0, 3.0, 0.0], obstacles);
+    let field = req.field();
+    let (result, _) = req.plan(&field);
+    let planned = result.expect("a partial manoeuvre");
+    assert!(!planned.complete);
+    let m = planned.manoeuvre;
+    assert!(m.points.iter().all(|p| field.clear(p.pose())));
+    let end = m.points[m.points.len() - 1];
+    // Nearer the opening than the start by more than the least progress...
+    assert!((end.x - 5.0).hypot(end.y - 3.0) < 5.83 - hybrid::PARTIAL_PROGRESS);
+    // ...without shuffling for it (taken nearest the opening at any cost, it backs up
+    // to it after a cusp, 8.8 m driven for 5.2 m forward).
+    assert_eq!(m.cusps(), 0);
+    assert!(m.points.iter().all(|p| p.forward));
+}
+
+#[test]
+fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
+    // Following a straight 8 m manoeuvre from its start: a post on it 6 m on (seen from
+    // afar, perhaps a few centimetres too big) does not drop it yet; 2 m on, it does.
+    let straight = Manoeuvre {
+        points: (1..=80)
+            .map(|k| PathPoint {
+                x: f64::from(k) * 0.1,
+                y: 0.0,
+                theta: 0.0,
+                curvature: 0.0,
+                forward: true,
+            })
+            .collect(),
+    };
+    let following = |post_x: f64| {
+        let mut req = request(
+            [0.0, 0.0, 0.0],
+            [8.0, 0.0, 0.0],
+            vec![post(post_x, 0.0, 0.2)],
+        );
+        req.following = Some(straight.clone());
+        req.following_holds()
+    };
+    assert!(following(8.5));
+    assert!(!following(4.0));
+    assert!(following(14.0));
 }
