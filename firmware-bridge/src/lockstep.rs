@@ -30,6 +30,10 @@ use iceoryx2::prelude::*;
 
 type Svc = ipc_threadsafe::Service;
 
+/// How often a leader waiting for an answer hands its last tick to receivers that
+/// connected since it went out.
+const REFRESH_EVERY: Duration = Duration::from_millis(20);
+
 /// Distinct CAN IDs a [`CanCounts`] tells apart; frames of further IDs are counted
 /// together ([`CanCounts::other`]).
 pub const MAX_CAN_IDS: usize = 16;
@@ -340,11 +344,21 @@ impl ClockLeader {
         timeout: Duration,
         wanted: impl Fn(&ClockAck) -> bool,
     ) -> Result<Option<ClockAck>, ClockError> {
-        if let Some(ack) = self.acks.wait(Duration::ZERO, &wanted)? {
-            return Ok(Some(ack));
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(ack) = self.acks.wait(Duration::ZERO, &wanted)? {
+                return Ok(Some(ack));
+            }
+            // A controller that connected meanwhile gets the last tick.
+            self.ticks.refresh()?;
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            if let Some(ack) = self.acks.wait(left.min(REFRESH_EVERY), &wanted)? {
+                return Ok(Some(ack));
+            }
         }
-        self.ticks.refresh()?;
-        self.acks.wait(timeout, wanted)
     }
 }
 

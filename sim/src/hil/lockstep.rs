@@ -39,7 +39,7 @@ pub const FIRST_ACK_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// What came back for a tick.
 enum Answer {
-    Ack(ClockAck),
+    Ack(Box<ClockAck>),
     /// The controller is gone, for this reason.
     Gone(String),
 }
@@ -100,7 +100,7 @@ impl Lockstep<'_> {
         loop {
             let slice = Duration::from_millis(50);
             if let Some(ack) = wait(self.leader, slice).map_err(clock_err)? {
-                return Ok(Answer::Ack(ack));
+                return Ok(Answer::Ack(Box::new(ack)));
             }
             if let Some(c) = controller.as_deref_mut()
                 && let Ok(Some(status)) = c.child.try_wait()
