@@ -22,7 +22,7 @@ use firmware_bridge::lockstep::{
 use ugv_controller::core::COMMAND_PERIOD;
 
 use super::process::ControllerProcess;
-use super::{EcuSocket, HilError, Wires, signal_process_fault};
+use super::{EcuSocket, HilError, Wires, signal_process_fault, stopped_by_signal};
 use crate::faults::ProcessFault;
 use crate::record::Recording;
 use crate::record::tap::SocketTap;
@@ -44,15 +44,15 @@ enum Answer {
     Gone(String),
 }
 
-/// The clock wire's simulator end and what it needs to judge an answer.
+/// The clock wire's simulator end, and the ECUs' gate: what the controller said it
+/// sent.
 #[derive(Debug)]
-pub struct Lockstep<'a> {
-    pub leader: &'a ClockLeader,
-    /// The ECUs' gate: what the controller said it sent.
-    pub gate: &'a Gate,
+pub struct Lockstep {
+    pub leader: ClockLeader,
+    pub gate: Gate,
 }
 
-impl Lockstep<'_> {
+impl Lockstep {
     /// Publish controller tick `tick` with what the wires carried so far, and wait for
     /// its answer.
     fn tick(
@@ -99,7 +99,7 @@ impl Lockstep<'_> {
         let deadline = Instant::now() + bound;
         loop {
             let slice = Duration::from_millis(50);
-            if let Some(ack) = wait(self.leader, slice).map_err(clock_err)? {
+            if let Some(ack) = wait(&self.leader, slice).map_err(clock_err)? {
                 return Ok(Answer::Ack(Box::new(ack)));
             }
             if let Some(c) = controller.as_deref_mut()
@@ -165,7 +165,7 @@ fn clock_err(e: ClockError) -> HilError {
 pub fn run_lockstep(
     sim: &mut Sim<EcuSocket>,
     wires: &mut Wires,
-    lockstep: &Lockstep<'_>,
+    lockstep: &Lockstep,
     mut controller: Option<&mut ControllerProcess>,
     stop: &AtomicBool,
     status_every: f64,
@@ -185,10 +185,7 @@ pub fn run_lockstep(
     };
     let outcome = loop {
         if stop.load(Ordering::Relaxed) {
-            break Outcome::Stopped {
-                time: sim.time(),
-                reason: "stopped by signal".to_owned(),
-            };
+            break stopped_by_signal(sim.time());
         }
         let k = sim.next_tick();
         let now = k as f64 * sim.dt();

@@ -127,8 +127,6 @@ pub type EcuSocket = Gated<TimedSocket>;
 pub struct Endpoints {
     steering: CanPort<EcuSocket>,
     throttle: CanPort<EcuSocket>,
-    /// The ECUs' gate, in lockstep.
-    gate: Option<Gate>,
     /// The pacing of the ECUs' transmissions (`can.bit_timing`).
     pacer: Option<Pacer>,
     tap: Option<SocketTap>,
@@ -223,12 +221,11 @@ impl Endpoints {
             horizon,
             gateway_logs,
             options.rt_priority,
-            options.lockstep,
+            gate,
         )?;
         Ok(Endpoints {
             steering,
             throttle,
-            gate,
             pacer,
             tap,
             wires,
@@ -238,8 +235,9 @@ impl Endpoints {
 }
 
 /// Step in real time on absolute deadlines, the sensors' output on the wires, until
-/// the run is over, `stop` is raised, or the controller exits. Returns the outcome
-/// and the monotonic time of tick 0 (see [`fix_latency`]).
+/// the run is over, `stop` is raised, or the controller exits (in lockstep, when the
+/// wires have a clock: [`run_lockstep`]). Returns the outcome and the monotonic time
+/// of tick 0 (see [`fix_latency`]).
 pub fn run_hil(
     sim: &mut Sim<EcuSocket>,
     wires: &mut Wires,
@@ -249,19 +247,25 @@ pub fn run_hil(
     status: &mut dyn FnMut(&Snapshot),
     mut recording: Option<&mut Recording<SocketTap>>,
 ) -> Result<(Outcome, u64), HilError> {
+    if let Some(lockstep) = wires.lockstep.take() {
+        return run_lockstep(
+            sim,
+            wires,
+            &lockstep,
+            controller,
+            stop,
+            status_every,
+            status,
+            recording,
+        );
+    }
     let mut clock = WallClock::new(sim.dt());
     let started = clock.start_monotonic_ns();
     let every = ((status_every / sim.dt()).round() as u64).max(1);
     let mut process = ProcessFault::Running;
     loop {
         if stop.load(Ordering::Relaxed) {
-            return Ok((
-                Outcome::Stopped {
-                    time: sim.time(),
-                    reason: "stopped by signal".to_owned(),
-                },
-                started,
-            ));
+            return Ok((stopped_by_signal(sim.time()), started));
         }
         let k = sim.next_tick();
         let late = clock.wait_tick(k);
@@ -429,7 +433,6 @@ pub fn run_scenario(
     let Endpoints {
         steering,
         throttle,
-        gate,
         pacer,
         tap,
         mut wires,
@@ -442,12 +445,9 @@ pub fn run_scenario(
     let (config_path, trace_path) = write_run_files(options, &wires.map, config)?;
     let mut controller =
         start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
-    if options.lockstep {
-        log(&format!(
-            "lockstep on {}: the simulator waits for each tick's acknowledgement",
-            wires.map.clock_service.as_deref().unwrap_or("?")
-        ));
-    } else if controller.is_none()
+    // In lockstep the simulator waits for the controller's answer to its start instead.
+    if controller.is_none()
+        && !options.lockstep
         && !await_controller(sc, options, &iface, &config_path, stop, log)?
     {
         return Ok(stopped_before_start(sc, &sim));
@@ -459,28 +459,15 @@ pub fn run_scenario(
     // The controller and every helper thread were started: they stay ordinary.
     let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
     log(&rt_sched.promotion.describe("tick loop"));
-    let clock = wires.clock.take();
-    let run = match (&gate, &clock) {
-        (Some(gate), Some(leader)) => run_lockstep(
-            &mut sim,
-            &mut wires,
-            &Lockstep { leader, gate },
-            controller.as_mut(),
-            stop,
-            options.status_every,
-            status,
-            recording.as_mut(),
-        ),
-        _ => run_hil(
-            &mut sim,
-            &mut wires,
-            controller.as_mut(),
-            stop,
-            options.status_every,
-            status,
-            recording.as_mut(),
-        ),
-    };
+    let run = run_hil(
+        &mut sim,
+        &mut wires,
+        controller.as_mut(),
+        stop,
+        options.status_every,
+        status,
+        recording.as_mut(),
+    );
     drop(rt_sched);
     if let Some(summary) = recording.and_then(Recording::finish) {
         log(&crate::record::describe(&summary));
@@ -520,12 +507,17 @@ pub fn run_scenario(
     Ok((verdict, outcome))
 }
 
+/// The outcome of a run stopped by signal (Ctrl-C) at `time`.
+fn stopped_by_signal(time: f64) -> Outcome {
+    Outcome::Stopped {
+        time,
+        reason: "stopped by signal".to_owned(),
+    }
+}
+
 /// The verdict of a run stopped by signal while it waited for its controller.
 fn stopped_before_start(sc: &Scenario, sim: &Sim<EcuSocket>) -> (crate::verdict::Verdict, Outcome) {
-    let outcome = Outcome::Stopped {
-        time: 0.0,
-        reason: "stopped by signal".to_owned(),
-    };
+    let outcome = stopped_by_signal(0.0);
     let verdict = crate::verdict::Verdict::judge(Mode::Hil, sc, sim.report(outcome.clone()), None);
     (verdict, outcome)
 }
@@ -579,6 +571,11 @@ fn log_wires(m: &WireMap, iface: &str, log: &mut dyn FnMut(&str)) {
         m.can,
         m.controller,
     ));
+    if let Some(clock) = &m.clock_service {
+        log(&format!(
+            "lockstep on {clock}: the simulator waits for each tick's acknowledgement"
+        ));
+    }
     for (physical, nodes) in &m.gateways {
         log(&format!(
             "gateway {iface} <-> {physical}: physical {}",

@@ -4,13 +4,14 @@
 
 use std::path::{Path, PathBuf};
 
+use firmware_bridge::can::gated::Gate;
 use firmware_bridge::can::timed::Horizon;
 use firmware_bridge::cola::{ColaServer, DecodeOptions, ServerConfig};
 use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayHandle};
 use firmware_bridge::laser::{LaserFrame, LaserPublisher, service_name};
 use firmware_bridge::lockstep::{ClockLeader, clock_service_name};
 
-use super::HilError;
+use super::{HilError, Lockstep};
 use crate::devices::cola_driver::ColaDriverThread;
 use crate::devices::gps::GpsPort;
 use crate::devices::laser::LaserProfile;
@@ -66,8 +67,8 @@ pub struct Wires {
     gateways: Vec<GatewayHandle>,
     /// Up to when the simulated ECUs' timed sockets hand out frames (set per tick).
     pub(super) can_horizon: Horizon,
-    /// The clock wire's simulator end, in lockstep.
-    pub(super) clock: Option<ClockLeader>,
+    /// The clock wire's simulator end and the ECUs' gate, in lockstep.
+    pub(super) lockstep: Option<Lockstep>,
 }
 
 impl std::fmt::Debug for Wires {
@@ -213,15 +214,16 @@ impl Wires {
         can_horizon: Horizon,
         gateway_logs: Option<&Path>,
         rt_priority: u8,
-        lockstep: bool,
+        gate: Option<Gate>,
     ) -> Result<Wires, HilError> {
         let devices = &sc.devices;
-        let clock = match lockstep {
-            true => Some(
-                ClockLeader::new(&clock_service_name(run_id))
+        let lockstep = match gate {
+            Some(gate) => Some(Lockstep {
+                leader: ClockLeader::new(&clock_service_name(run_id))
                     .map_err(|e| HilError::Clock(e.to_string()))?,
-            ),
-            false => None,
+                gate,
+            }),
+            None => None,
         };
         let (gps, gps_line) = match &devices.gps {
             GpsOutput::Pty {} => (GpsPort::open(Some(gps_link), sc.gps.baud)?, "pty"),
@@ -256,14 +258,14 @@ impl Wires {
                     ControllerSite::Local {} => "local".to_owned(),
                     ControllerSite::Board { can } => format!("board on {can}"),
                 },
-                clock_service: clock.as_ref().map(|c| c.service().to_owned()),
+                clock_service: lockstep.as_ref().map(|l| l.leader.service().to_owned()),
             },
             gps,
             laser: laser.out,
             driver: laser.driver,
             gateways,
             can_horizon,
-            clock,
+            lockstep,
         })
     }
 
