@@ -10,8 +10,8 @@
 //! iceoryx2 hands a laser frame over within the publisher's call, so the laser needs
 //! no count), runs its tick, sends its frames, and publishes a [`ClockAck`] on
 //! `ugv-hil/<run id>/clock-ack` with the CAN frames it has sent per ID. The simulator
-//! steps on only then, and its ECUs read until they have those frames
-//! ([`crate::can::gated`]). So every input of a tick is in before the tick is taken,
+//! steps on only then, and its ECUs read until they have those frames (the gated
+//! CAN endpoints of `can::gated`). So every input of a tick is in before the tick is taken,
 //! by construction, and a run gives the same result however slow or loaded the
 //! machine: docs/wire-contract.md, "Lockstep".
 //!
@@ -39,7 +39,7 @@ const REFRESH_EVERY: Duration = Duration::from_millis(20);
 pub const MAX_CAN_IDS: usize = 16;
 
 /// CAN frames sent since the start, per ID (standard IDs as they are, extended ones
-/// with bit 31 set; see [`crate::can::gated::counted_id`]).
+/// with bit 31 set: [`CanCounts::key`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
 #[type_name("ugv_hil::CanCounts::v1")]
@@ -56,7 +56,15 @@ pub struct CanCounts {
 }
 
 impl CanCounts {
-    /// One more frame of `id`.
+    /// The key of a frame's ID: standard IDs as they are, extended ones with bit 31 set.
+    pub fn key(id: embedded_can::Id) -> u32 {
+        match id {
+            embedded_can::Id::Standard(s) => u32::from(s.as_raw()),
+            embedded_can::Id::Extended(e) => e.as_raw() | 0x8000_0000,
+        }
+    }
+
+    /// One more frame of `id` (a [`CanCounts::key`]).
     pub fn add(&mut self, id: u32) {
         let len = (self.len as usize).min(MAX_CAN_IDS);
         match self.ids[..len].iter().position(|&i| i == id) {

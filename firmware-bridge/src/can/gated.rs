@@ -16,7 +16,7 @@ use std::io;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-use embedded_can::{Frame, Id};
+use embedded_can::Frame;
 
 use super::{Filtered, QueueDrops};
 use crate::lockstep::CanCounts;
@@ -65,15 +65,6 @@ impl Gate {
     }
 }
 
-/// The raw ID of a frame as [`CanCounts`] keys it: standard IDs as they are, extended
-/// ones with bit 31 set.
-pub fn counted_id(id: Id) -> u32 {
-    match id {
-        Id::Standard(s) => u32::from(s.as_raw()),
-        Id::Extended(e) => e.as_raw() | 0x8000_0000,
-    }
-}
-
 /// A raw SocketCAN socket, gated.
 pub type GatedSocket = Gated<socketcan::CanSocket>;
 
@@ -109,10 +100,6 @@ impl<B> Gated<B> {
         &self.inner
     }
 
-    pub fn inner_mut(&mut self) -> &mut B {
-        &mut self.inner
-    }
-
     /// Whether it is in lockstep.
     pub fn gated(&self) -> bool {
         self.gate.is_some()
@@ -141,7 +128,7 @@ impl<B: embedded_can::nb::Can> embedded_can::nb::Can for Gated<B> {
     fn transmit(&mut self, frame: &B::Frame) -> nb::Result<Option<B::Frame>, B::Error> {
         let r = self.inner.transmit(frame)?;
         if let Some(gate) = &self.gate {
-            let id = counted_id(frame.id());
+            let id = CanCounts::key(frame.id());
             self.own.add(id);
             gate.state().side.add(id);
         }
