@@ -16,7 +16,7 @@
 //! machine: docs/wire-contract.md, "Lockstep".
 //!
 //! Each direction is a publish-subscribe service and an event service of the same name
-//! (the wake-up), both `ipc_threadsafe`, with the QoS of [`open_channel`]; either side
+//! (the wake-up), both `ipc_threadsafe`, with the QoS of [`open_services`]; either side
 //! may create them.
 
 use std::time::{Duration, Instant};
@@ -27,6 +27,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 type Svc = ipc_threadsafe::Service;
 
@@ -160,30 +161,24 @@ fn err(service: &str, op: &'static str, e: impl std::fmt::Debug) -> ClockError {
     }
 }
 
-/// One direction of the clock wire, one end of it.
-struct Channel<T: std::fmt::Debug + ZeroCopySend + 'static> {
+/// The node and the two services (messages and their wake-up) of one end of one
+/// direction of the clock wire.
+struct Services<T: std::fmt::Debug + ZeroCopySend + 'static> {
     name: String,
-    publisher: Option<Publisher<Svc, T, ()>>,
-    notifier: Option<Notifier<Svc>>,
-    subscriber: Option<Subscriber<Svc, T, ()>>,
-    listener: Option<Listener<Svc>>,
-    _node: Node<Svc>,
+    node: Node<Svc>,
+    messages: publish_subscribe::PortFactory<Svc, T, ()>,
+    events: event::PortFactory<Svc>,
 }
 
-/// Open (or create) the channel `service` and its event service, as a sender or as a
-/// receiver: history 1 (a receiver that connects late gets the last message), a
-/// receiver's buffer of 4 with the oldest overwritten, at most 2 receivers.
-fn open_channel<T: std::fmt::Debug + ZeroCopySend + 'static>(
+/// Open (or create) the services `service` with the wire's QoS: history 1 (a receiver
+/// that connects late gets the last message), a receiver's buffer of 4 with the oldest
+/// overwritten, at most 2 receivers.
+fn open_services<T: std::fmt::Debug + ZeroCopySend + 'static>(
     service: &str,
-    send: bool,
-) -> Result<Channel<T>, ClockError> {
+    node_name: &str,
+) -> Result<Services<T>, ClockError> {
     let name = ServiceName::new(service).map_err(|e| err(service, "name the service", e))?;
-    let node_name = NodeName::new(if send {
-        "ugv-clock-sender"
-    } else {
-        "ugv-clock-receiver"
-    })
-    .map_err(|e| err(service, "name the node", e))?;
+    let node_name = NodeName::new(node_name).map_err(|e| err(service, "name the node", e))?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -194,7 +189,7 @@ fn open_channel<T: std::fmt::Debug + ZeroCopySend + 'static>(
         .service_builder(&name)
         .publish_subscribe::<T>()
         .history_size(1)
-        .subscriber_max_buffer_size(4)
+        .subscriber_max_buffer_size(RECEIVER_BUFFER)
         .max_subscribers(2)
         .enable_safe_overflow(true)
         .open_or_create()
@@ -204,75 +199,103 @@ fn open_channel<T: std::fmt::Debug + ZeroCopySend + 'static>(
         .event()
         .open_or_create()
         .map_err(|e| err(service, "open the event service", e))?;
-    let mut ch = Channel {
+    Ok(Services {
         name: service.to_owned(),
-        publisher: None,
-        notifier: None,
-        subscriber: None,
-        listener: None,
-        _node: node,
-    };
-    if send {
-        ch.publisher = Some(
-            messages
+        node,
+        messages,
+        events,
+    })
+}
+
+/// Messages a receiver keeps before the oldest is overwritten.
+const RECEIVER_BUFFER: usize = 4;
+
+/// The sending end of one direction.
+struct Sender<T: std::fmt::Debug + ZeroCopySend + 'static> {
+    name: String,
+    publisher: Publisher<Svc, T, ()>,
+    notifier: Notifier<Svc>,
+    _node: Node<Svc>,
+}
+
+/// The receiving end of one direction.
+struct Receiver<T: std::fmt::Debug + ZeroCopySend + 'static> {
+    name: String,
+    subscriber: Subscriber<Svc, T, ()>,
+    listener: Listener<Svc>,
+    _node: Node<Svc>,
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Sender<T> {
+    fn open(service: &str) -> Result<Sender<T>, ClockError> {
+        let s = open_services::<T>(service, "ugv-clock-sender")?;
+        Ok(Sender {
+            publisher: s
+                .messages
                 .publisher_builder()
                 .create()
                 .map_err(|e| err(service, "create the publisher", e))?,
-        );
-        ch.notifier = Some(
-            events
+            notifier: s
+                .events
                 .notifier_builder()
                 .create()
                 .map_err(|e| err(service, "create the notifier", e))?,
-        );
-    } else {
-        ch.subscriber = Some(
-            messages
-                .subscriber_builder()
-                .buffer_size(4)
-                .create()
-                .map_err(|e| err(service, "create the subscriber", e))?,
-        );
-        ch.listener = Some(
-            events
-                .listener_builder()
-                .create()
-                .map_err(|e| err(service, "create the listener", e))?,
-        );
+            name: s.name,
+            _node: s.node,
+        })
     }
-    Ok(ch)
-}
 
-impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Channel<T> {
     fn send(&self, message: T) -> Result<(), ClockError> {
-        let (Some(p), Some(n)) = (&self.publisher, &self.notifier) else {
-            return Err(err(&self.name, "send", "a receiving end"));
-        };
-        p.send_copy(message)
+        self.publisher
+            .send_copy(message)
             .map_err(|e| err(&self.name, "send", e))?;
-        n.notify().map_err(|e| err(&self.name, "notify", e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| err(&self.name, "notify", e))?;
         Ok(())
     }
 
     /// Connect receivers that appeared since the last message and hand them the last
     /// one (the history), then wake them.
     fn refresh(&self) -> Result<(), ClockError> {
-        let (Some(p), Some(n)) = (&self.publisher, &self.notifier) else {
-            return Err(err(&self.name, "update connections", "a receiving end"));
-        };
-        p.update_connections()
+        self.publisher
+            .update_connections()
             .map_err(|e| err(&self.name, "update connections", e))?;
-        n.notify().map_err(|e| err(&self.name, "notify", e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| err(&self.name, "notify", e))?;
         Ok(())
+    }
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
+    fn open(service: &str) -> Result<Receiver<T>, ClockError> {
+        let s = open_services::<T>(service, "ugv-clock-receiver")?;
+        Ok(Receiver {
+            subscriber: s
+                .messages
+                .subscriber_builder()
+                .buffer_size(RECEIVER_BUFFER)
+                .create()
+                .map_err(|e| err(service, "create the subscriber", e))?,
+            listener: s
+                .events
+                .listener_builder()
+                .create()
+                .map_err(|e| err(service, "create the listener", e))?,
+            name: s.name,
+            _node: s.node,
+        })
     }
 
     /// The newest message there is, without waiting.
     fn newest(&self) -> Result<Option<T>, ClockError> {
-        let Some(s) = &self.subscriber else {
-            return Err(err(&self.name, "receive", "a sending end"));
-        };
         let mut newest = None;
-        while let Some(sample) = s.receive().map_err(|e| err(&self.name, "receive", e))? {
+        while let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|e| err(&self.name, "receive", e))?
+        {
             newest = Some(*sample.payload());
         }
         Ok(newest)
@@ -293,10 +316,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Channel<T> {
             if left.is_zero() {
                 return Ok(None);
             }
-            let Some(l) = &self.listener else {
-                return Err(err(&self.name, "wait", "a sending end"));
-            };
-            match l.timed_wait(|_| {}, left) {
+            match self.listener.timed_wait(|_| {}, left) {
                 Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
                 Err(e) => return Err(err(&self.name, "wait", e)),
             }
@@ -306,8 +326,8 @@ impl<T: std::fmt::Debug + ZeroCopySend + Copy + 'static> Channel<T> {
 
 /// The simulator's end: publishes ticks, waits for their acknowledgements.
 pub struct ClockLeader {
-    ticks: Channel<ClockTick>,
-    acks: Channel<ClockAck>,
+    ticks: Sender<ClockTick>,
+    acks: Receiver<ClockAck>,
 }
 
 impl std::fmt::Debug for ClockLeader {
@@ -323,8 +343,8 @@ impl ClockLeader {
     /// acknowledgements.
     pub fn new(service: &str) -> Result<ClockLeader, ClockError> {
         Ok(ClockLeader {
-            ticks: open_channel(service, true)?,
-            acks: open_channel(&ack_service_name(service), false)?,
+            ticks: Sender::open(service)?,
+            acks: Receiver::open(&ack_service_name(service))?,
         })
     }
 
@@ -372,8 +392,8 @@ impl ClockLeader {
 
 /// The controller's end: takes ticks, acknowledges them.
 pub struct ClockFollower {
-    ticks: Channel<ClockTick>,
-    acks: Channel<ClockAck>,
+    ticks: Receiver<ClockTick>,
+    acks: Sender<ClockAck>,
 }
 
 impl std::fmt::Debug for ClockFollower {
@@ -388,8 +408,8 @@ impl ClockFollower {
     /// Open the clock service `service` and its acknowledgements.
     pub fn new(service: &str) -> Result<ClockFollower, ClockError> {
         Ok(ClockFollower {
-            ticks: open_channel(service, false)?,
-            acks: open_channel(&ack_service_name(service), true)?,
+            ticks: Receiver::open(service)?,
+            acks: Sender::open(&ack_service_name(service))?,
         })
     }
 
