@@ -167,6 +167,10 @@ pub struct PlannerConfig {
     /// local map, forward and backward): the clearance the car's rectangle keeps from
     /// every obstacle, metres.
     pub manoeuvre_margin: f64,
+    /// A car hemmed in at `manoeuvre_margin` (every step from where it stands comes
+    /// nearer an obstacle than that) creeps out on an escape that keeps twice this,
+    /// else this, until the full margin clears it again, metres.
+    pub manoeuvre_escape_margin: f64,
     /// Speed of a manoeuvre's forward segments, m/s (its backward ones go at
     /// `reverse_speed`).
     pub manoeuvre_speed: f64,
@@ -214,6 +218,7 @@ impl Default for PlannerConfig {
             max_reversals: 2,
             reversal_reset_m: 10.0,
             manoeuvre_margin: 0.25,
+            manoeuvre_escape_margin: 0.05,
             manoeuvre_speed: 0.8,
             manoeuvre_steer_usage: 0.8,
             manoeuvre_expansions: 20_000,
@@ -700,6 +705,7 @@ pub const BOUNDS: &[Bound<ControllerConfig>] = &[
         Range::new(1.0, 1000.0, "m", "progress along the route")
     ),
     row!(planner.manoeuvre_margin, MARGIN),
+    row!(planner.manoeuvre_escape_margin, MARGIN),
     row!(planner.manoeuvre_speed, SPEED),
     row!(
         planner.manoeuvre_steer_usage,

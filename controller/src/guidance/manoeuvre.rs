@@ -51,6 +51,13 @@ pub const HOLD_SLACK: f64 = 0.1;
 /// centimetres too tight, seen from afar, is driven towards and looked at again from
 /// nearer, not given up at once for a search from here.
 const HOLD_AHEAD: usize = 30;
+/// A search that runs out of poses within this many expansions found the car hemmed
+/// in at the margin: every step from where it stands, forward or back, comes nearer
+/// an obstacle than the margin (outlines grow as the car comes near them).
+pub const HEMMED: usize = 50;
+/// An escape is cut where the rectangle clears every obstacle by the full margin over
+/// this many samples (0.4 m): from there the searches keep the margin again.
+const ESCAPE_CLEAR: usize = 4;
 
 /// One manoeuvre search: from the car's pose to the first of `goals` it reaches, among
 /// the obstacles, the car's rectangle grown by the manoeuvre margin.
@@ -75,6 +82,11 @@ pub struct ManoeuvreRequest {
     /// ([`Following::look_again`]): search again while it holds, and take a complete
     /// manoeuvre if one is found now.
     pub look_again: bool,
+    /// The manoeuvre being followed is an escape planned with this narrower margin: it
+    /// holds while it clears the obstacles by that ([`ManoeuvreRequest::escape`]).
+    pub following_margin: Option<f64>,
+    /// The least margin an escape keeps, metres: it tries twice this, then this.
+    pub escape_margin: f64,
 }
 
 /// The obstacles as discs: static ones as they are, moving ones swept along their
@@ -114,12 +126,16 @@ impl ManoeuvreRequest {
     /// The distance field round the start and the goals (and the manoeuvre being
     /// followed).
     pub fn field(&self) -> Field {
+        self.field_at(Some(self.start))
+    }
+
+    /// The distance field with every obstacle the car standing at `shrink` is within
+    /// the margin of planned as just clear of it (as the passages' check does), so a
+    /// manoeuvre may lead away from it: its radius shrinks, below zero if need be (a
+    /// disc's radius plus the margin is the clearance the rectangle keeps from its
+    /// centre). None: every obstacle as it is.
+    fn field_at(&self, shrink: Option<[f64; 3]>) -> Field {
         let (lo, hi) = self.window();
-        // An obstacle the car already stands within the margin of is planned as just
-        // clear of where it stands (as the passages' check does), so a manoeuvre may lead
-        // away from it: its radius shrinks, below zero if need be (a disc's radius plus
-        // the margin is the clearance the rectangle keeps from its centre).
-        let [x, y, theta] = self.start;
         let f = &self.footprint;
         let cell = crate::perception::SEEN_CELL * std::f64::consts::FRAC_1_SQRT_2;
         let remembered = self.remembered.iter().map(|h| Disc {
@@ -130,11 +146,14 @@ impl ManoeuvreRequest {
         let discs = discs(&self.obstacles)
             .into_iter()
             .chain(remembered)
-            .map(|d| Disc {
-                r: d.r.min(
-                    (f.distance(x, y, theta, d.x, d.y) - f.margin - START_SLACK).max(-f.margin),
-                ),
-                ..d
+            .map(|d| match shrink {
+                Some([x, y, theta]) => Disc {
+                    r: d.r.min(
+                        (f.distance(x, y, theta, d.x, d.y) - f.margin - START_SLACK).max(-f.margin),
+                    ),
+                    ..d
+                },
+                None => d,
             })
             .collect();
         Field::new(lo, hi, FIELD_RES, discs, self.footprint).with_seen(self.seen.clone())
@@ -166,9 +185,10 @@ impl ManoeuvreRequest {
     /// dropped for a few centimetres would be searched anew, and the car would shuffle)
     /// over the next [`HOLD_AHEAD`] samples, with the car within [`OFF_PATH`] of it.
     pub fn following_holds(&self) -> bool {
+        let margin = self.following_margin.unwrap_or(self.footprint.margin);
         let field = ManoeuvreRequest {
             footprint: Footprint {
-                margin: (self.footprint.margin - HOLD_SLACK).max(0.0),
+                margin: (margin - HOLD_SLACK.min(0.4 * margin)).max(0.0),
                 ..self.footprint
             },
             ..self.clone()
@@ -217,6 +237,7 @@ impl ManoeuvreRequest {
                     let planned = Planned {
                         manoeuvre: found.manoeuvre.smoothed(self.start, field),
                         complete: found.complete,
+                        escape_margin: None,
                     };
                     if found.complete {
                         return (Ok(planned), expansions);
@@ -233,6 +254,61 @@ impl ManoeuvreRequest {
         }
         (partial.map_or(last, Ok), expansions)
     }
+
+    /// [`ManoeuvreRequest::plan`], and out of a place the car is hemmed in at the
+    /// margin ([`HEMMED`]) an escape ([`ManoeuvreRequest::escape`]).
+    pub fn plan_or_escape(&self, field: &Field) -> (Result<Planned, Failure>, usize) {
+        let (found, expansions) = self.plan(field);
+        match found {
+            Err(Failure::Exhausted(n)) if n < HEMMED => {
+                let (escape, more) = self.escape(expansions);
+                (
+                    escape.ok_or(Failure::Exhausted(n + more)),
+                    expansions + more,
+                )
+            }
+            found => (found, expansions),
+        }
+    }
+
+    /// Out of a place the car is hemmed in at the margin (the obstacles' outlines grew
+    /// as it came near, or it came off its path; a careful driver creeps out): the same
+    /// search with the margin narrowed to twice `escape_margin`, then to it, within
+    /// what is left of the budget after `spent` expansions, cut where the rectangle
+    /// clears every obstacle by the full margin again ([`ESCAPE_CLEAR`]); driven at a
+    /// crawl. With the expansions it took.
+    pub fn escape(&self, spent: usize) -> (Option<Planned>, usize) {
+        let full = self.field_at(None);
+        let mut expansions = 0;
+        for margin in [2.0 * self.escape_margin, self.escape_margin] {
+            if margin >= self.footprint.margin {
+                continue;
+            }
+            let narrow = ManoeuvreRequest {
+                footprint: Footprint {
+                    margin,
+                    ..self.footprint
+                },
+                settings: Settings {
+                    max_expansions: self
+                        .settings
+                        .max_expansions
+                        .saturating_sub(spent + expansions),
+                    ..self.settings
+                },
+                ..self.clone()
+            };
+            if narrow.settings.max_expansions == 0 {
+                break;
+            }
+            let (found, n) = narrow.plan(&narrow.field());
+            expansions += n;
+            if let Ok(planned) = found {
+                return (Some(planned.escaping(margin, &full)), expansions);
+            }
+        }
+        (None, expansions)
+    }
 }
 
 /// A manoeuvre found: to a goal (complete), or towards one as far as what is known
@@ -241,6 +317,30 @@ impl ManoeuvreRequest {
 pub struct Planned {
     pub manoeuvre: Manoeuvre,
     pub complete: bool,
+    /// An escape ([`ManoeuvreRequest::escape`]): the narrower margin it keeps.
+    pub escape_margin: Option<f64>,
+}
+
+impl Planned {
+    /// This manoeuvre as an escape planned with `margin`: cut [`ESCAPE_CLEAR`] samples
+    /// into the first stretch that `full` (the field at the full margin) clears.
+    fn escaping(self, margin: f64, full: &Field) -> Planned {
+        let points = &self.manoeuvre.points;
+        let out = (0..points.len().saturating_sub(ESCAPE_CLEAR)).find(|&k| {
+            points[k..k + ESCAPE_CLEAR]
+                .iter()
+                .all(|p| full.clear(p.pose()))
+        });
+        let mut manoeuvre = self.manoeuvre;
+        if let Some(k) = out {
+            manoeuvre.points.truncate(k + ESCAPE_CLEAR);
+        }
+        Planned {
+            manoeuvre,
+            complete: self.complete && out.is_none(),
+            escape_margin: Some(margin),
+        }
+    }
 }
 
 #[cfg(test)]

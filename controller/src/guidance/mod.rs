@@ -729,6 +729,11 @@ impl Navigator {
                     .manoeuvre
                     .as_ref()
                     .is_some_and(manoeuvre::Following::look_again),
+                following_margin: self
+                    .manoeuvre
+                    .as_ref()
+                    .and_then(manoeuvre::Following::escape_margin),
+                escape_margin: pc.manoeuvre_escape_margin,
             }
             .with_seen(&self.seen),
         )
@@ -934,6 +939,7 @@ impl Navigator {
                 let plan = record.manoeuvre.as_mut().and_then(|m| m.plan.take());
                 let failed = record.manoeuvre.as_ref().is_some_and(|m| m.failed);
                 let complete = record.manoeuvre.as_ref().is_some_and(|m| m.complete);
+                let escape = record.manoeuvre.as_ref().and_then(|m| m.escape_margin);
                 let searched = record.manoeuvre.as_ref().is_some_and(|m| m.expansions > 0);
                 // The manoeuvre being followed holds (a record without a new one).
                 let holds = record.kept && plan.is_none() && record.manoeuvre.is_some() && !failed;
@@ -955,7 +961,7 @@ impl Navigator {
                 self.search_effort = self.search_effort.after(failed, plan.is_some());
                 if !holds {
                     // A polynomial path, none, or a new manoeuvre: not the one followed.
-                    self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m, complete));
+                    self.manoeuvre = plan.and_then(|m| self.count_manoeuvre(m, complete, escape));
                 }
                 if !record.kept {
                     self.frame = outcome.frame;
@@ -985,6 +991,7 @@ impl Navigator {
         &mut self,
         m: manoeuvre::Manoeuvre,
         complete: bool,
+        escape: Option<f64>,
     ) -> Option<manoeuvre::Following> {
         let pc = &self.cfg.planner;
         if self.progress >= self.manoeuvre_best + pc.manoeuvre_progress_m {
@@ -995,7 +1002,7 @@ impl Navigator {
             return None;
         }
         self.manoeuvres += 1;
-        Some(manoeuvre::Following::new(m, complete))
+        Some(manoeuvre::Following::new(m, complete).escaping(escape))
     }
 
     /// Whether the manoeuvres allowed without progress are spent.
@@ -1113,8 +1120,13 @@ impl Navigator {
         let following = self.manoeuvre.as_mut()?;
         let pc = &self.cfg.planner;
         let v = &self.cfg.vehicle;
+        // An escape creeps out, forward as backward.
+        let forward = match following.escape_margin() {
+            Some(_) => pc.manoeuvre_speed.min(pc.reverse_speed),
+            None => pc.manoeuvre_speed,
+        };
         let pace = manoeuvre::follow::Pace {
-            forward_speed: pc.manoeuvre_speed.min(v.max_speed),
+            forward_speed: forward.min(v.max_speed),
             reverse_speed: pc.reverse_speed.min(v.max_speed),
             decel: self.cfg.follower.decel,
             coast: v.coast_m(pose.v.abs()),

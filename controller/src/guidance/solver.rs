@@ -84,6 +84,10 @@ pub struct ManoeuvreRecord {
     pub cusps: Vec<[f64; 2]>,
     /// The spans of `path` (first index, one past the last) driven backwards.
     pub reverse: Vec<[usize; 2]>,
+    /// An escape out of a place the car was hemmed in at the manoeuvre margin: the
+    /// narrower margin it keeps, metres (driven at a crawl).
+    #[serde(default)]
+    pub escape_margin: Option<f64>,
     /// The manoeuvre itself, for the navigator to follow (not in the trace: `path`,
     /// `reverse` and `cusps` say what it is).
     #[serde(skip)]
@@ -91,12 +95,18 @@ pub struct ManoeuvreRecord {
 }
 
 impl ManoeuvreRecord {
-    fn new(m: Manoeuvre, expansions: usize, complete: bool) -> ManoeuvreRecord {
+    fn new(planned: Planned, expansions: usize) -> ManoeuvreRecord {
+        let Planned {
+            manoeuvre: m,
+            complete,
+            escape_margin,
+        } = planned;
         let segments = m.segments();
         ManoeuvreRecord {
             expansions,
             complete,
             failed: false,
+            escape_margin,
             cusps: segments
                 .iter()
                 .skip(1)
@@ -280,7 +290,7 @@ fn manoeuvre(
     m: &ManoeuvreRequest,
     field: &Field,
 ) -> Result<PlanOutcome, ManoeuvreRecord> {
-    let (found, expansions) = m.plan(field);
+    let (found, expansions) = m.plan_or_escape(field);
     let Ok(planned) = found else {
         return Err(ManoeuvreRecord {
             expansions,
@@ -293,15 +303,16 @@ fn manoeuvre(
 
 /// The outcome of a search that found `planned` after `expansions`.
 fn found_manoeuvre(req: &PlanRequest, planned: Planned, expansions: usize) -> PlanOutcome {
-    let Planned {
-        manoeuvre: plan,
-        complete,
-    } = planned;
     let (_, mut record) = record(req.time, &req.frame, None, false);
     record.feasible = true;
     record.goal_blocked = req.goal_blocked;
-    record.path = plan.points.iter().map(|p| [p.x, p.y]).collect();
-    record.manoeuvre = Some(ManoeuvreRecord::new(plan, expansions, complete));
+    record.path = planned
+        .manoeuvre
+        .points
+        .iter()
+        .map(|p| [p.x, p.y])
+        .collect();
+    record.manoeuvre = Some(ManoeuvreRecord::new(planned, expansions));
     PlanOutcome {
         time: req.time,
         frame: req.frame,

@@ -54,6 +54,8 @@ pub struct Following {
     at: usize,
     /// The sample nearest the car when it was last searched for (from).
     looked_at: usize,
+    /// An escape: the narrower margin it was planned with (driven at a crawl).
+    escape_margin: Option<f64>,
 }
 
 /// How following is tuned: speeds (magnitudes), the deceleration to stop at a segment's
@@ -80,7 +82,21 @@ impl Following {
             segment: 0,
             at: 0,
             looked_at: 0,
+            escape_margin: None,
         }
+    }
+
+    /// This manoeuvre as an escape planned with `margin` (None: not an escape).
+    pub fn escaping(self, margin: Option<f64>) -> Following {
+        Following {
+            escape_margin: margin,
+            ..self
+        }
+    }
+
+    /// An escape's margin, metres (None: not an escape).
+    pub fn escape_margin(&self) -> Option<f64> {
+        self.escape_margin
     }
 
     /// A partial manoeuvre driven [`LOOK_AGAIN_M`] further since it was searched for

@@ -53,6 +53,8 @@ fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Circle>) -> Manoeuvre
         seen: None,
         remembered: Vec::new(),
         look_again: false,
+        following_margin: None,
+        escape_margin: 0.05,
     }
 }
 
@@ -248,4 +250,59 @@ fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
     assert!(following(8.5));
     assert!(!following(4.0));
     assert!(following(14.0));
+}
+
+/// The car hemmed in at a margin of 0.25 m by four posts 0.2 m clear of its corners,
+/// diagonally: every step forward or back passes one nearer than 0.25 m (the posts
+/// 0.08 m beside it), none nearer than 0.05 m.
+fn hemmed() -> ManoeuvreRequest {
+    let d = 0.4 * std::f64::consts::FRAC_1_SQRT_2;
+    let posts = [(2.025 + d, 0.6 + d), (-0.375 - d, 0.6 + d)]
+        .into_iter()
+        .flat_map(|(x, y)| [post(x, y, 0.2), post(x, -y, 0.2)])
+        .collect();
+    ManoeuvreRequest {
+        footprint: Footprint {
+            margin: 0.25,
+            ..CAR
+        },
+        ..request([0.0, 0.0, 0.0], [12.0, 0.0, 0.0], posts)
+    }
+}
+
+#[test]
+fn a_car_hemmed_in_at_the_margin_creeps_out_with_a_narrower_one_until_it_clears_again() {
+    let req = hemmed();
+    let field = req.field();
+    let (plain, n) = req.plan(&field);
+    assert!(
+        matches!(plain, Err(Failure::Exhausted(k)) if k < HEMMED),
+        "{plain:?} after {n}"
+    );
+    let (found, expansions) = req.plan_or_escape(&field);
+    let escape = found.expect("an escape");
+    assert!(expansions > n);
+    let margin = escape.escape_margin.expect("an escape's margin");
+    assert!(margin < req.footprint.margin && margin >= req.escape_margin);
+    // Every pose keeps the escape's margin from the posts (the brute-force check)...
+    let keeps = |p: &PathPoint, m: f64| {
+        req.obstacles
+            .iter()
+            .all(|o| req.footprint.distance(p.x, p.y, p.theta, o.x, o.y) > o.radius + m)
+    };
+    let points = &escape.manoeuvre.points;
+    assert!(points.iter().all(|p| keeps(p, margin)));
+    // ... and it ends once the full margin is kept again, over its last 0.4 m.
+    assert!(points.len() >= 4 && !escape.complete);
+    assert!(points[points.len() - 4..].iter().all(|p| keeps(p, 0.25)));
+    assert!(!keeps(&points[0], 0.25));
+}
+
+#[test]
+fn a_car_with_room_at_the_margin_gets_no_escape() {
+    let req = request([0.0, 0.0, 0.0], [12.0, 0.0, 0.0], vec![post(6.0, 0.0, 0.5)]);
+    let field = req.field();
+    let (found, _) = req.plan_or_escape(&field);
+    let found = found.expect("a manoeuvre");
+    assert!(found.complete && found.escape_margin.is_none());
 }
