@@ -55,8 +55,9 @@ const HOLD_AHEAD: usize = 30;
 /// in at the margin: every step from where it stands, forward or back, comes nearer
 /// an obstacle than the margin (outlines grow as the car comes near them).
 pub const HEMMED: usize = 50;
-/// An escape is cut where the rectangle clears every obstacle by the full margin over
-/// this many samples (0.4 m): from there the searches keep the margin again.
+/// An escape is cut this many samples (0.4 m) into the first stretch, after the part
+/// that needed the narrower margin, that clears every obstacle by the full margin: from
+/// there the searches keep the margin again.
 const ESCAPE_CLEAR: usize = 4;
 
 /// One manoeuvre search: from the car's pose to the first of `goals` it reaches, among
@@ -255,29 +256,27 @@ impl ManoeuvreRequest {
         (partial.map_or(last, Ok), expansions)
     }
 
-    /// [`ManoeuvreRequest::plan`], and out of a place the car is hemmed in at the
-    /// margin ([`HEMMED`]) an escape ([`ManoeuvreRequest::escape`]).
+    /// [`ManoeuvreRequest::plan`], and where it finds no way at the margin (the goal
+    /// and the car's own pose clear), an escape ([`ManoeuvreRequest::escape`]).
     pub fn plan_or_escape(&self, field: &Field) -> (Result<Planned, Failure>, usize) {
         let (found, expansions) = self.plan(field);
         match found {
-            Err(Failure::Exhausted(n)) if n < HEMMED => {
-                let (escape, more) = self.escape(expansions);
-                (
-                    escape.ok_or(Failure::Exhausted(n + more)),
-                    expansions + more,
-                )
+            Err(e @ (Failure::Exhausted(_) | Failure::Unreachable)) => {
+                let (escape, more) = self.escape();
+                (escape.ok_or(e), expansions + more)
             }
             found => (found, expansions),
         }
     }
 
-    /// Out of a place the car is hemmed in at the margin (the obstacles' outlines grew
-    /// as it came near, or it came off its path; a careful driver creeps out): the same
-    /// search with the margin narrowed to twice `escape_margin`, then to it, within
-    /// what is left of the budget after `spent` expansions, cut where the rectangle
+    /// Where the margin leaves no way (a gap wide enough for the car but not for its
+    /// margin, as outlines seen from near look; a car hemmed in at the margin,
+    /// [`HEMMED`], the outlines having grown as it came near), a careful driver creeps
+    /// through: the same search with the margin narrowed to twice `escape_margin`,
+    /// then (with what that one left of the budget) to it, cut where the rectangle
     /// clears every obstacle by the full margin again ([`ESCAPE_CLEAR`]); driven at a
     /// crawl. With the expansions it took.
-    pub fn escape(&self, spent: usize) -> (Option<Planned>, usize) {
+    pub fn escape(&self) -> (Option<Planned>, usize) {
         let full = self.field_at(None);
         let mut expansions = 0;
         for margin in [2.0 * self.escape_margin, self.escape_margin] {
@@ -293,7 +292,7 @@ impl ManoeuvreRequest {
                     max_expansions: self
                         .settings
                         .max_expansions
-                        .saturating_sub(spent + expansions),
+                        .saturating_sub(expansions),
                     ..self.settings
                 },
                 ..self.clone()
@@ -323,13 +322,14 @@ pub struct Planned {
 
 impl Planned {
     /// This manoeuvre as an escape planned with `margin`: cut [`ESCAPE_CLEAR`] samples
-    /// into the first stretch that `full` (the field at the full margin) clears.
+    /// into the first stretch that `full` (the field at the full margin) clears after
+    /// the first pose it does not.
     fn escaping(self, margin: f64, full: &Field) -> Planned {
         let points = &self.manoeuvre.points;
-        let out = (0..points.len().saturating_sub(ESCAPE_CLEAR)).find(|&k| {
-            points[k..k + ESCAPE_CLEAR]
-                .iter()
-                .all(|p| full.clear(p.pose()))
+        let clear = |p: &PathPoint| full.clear(p.pose());
+        let out = points.iter().position(|p| !clear(p)).and_then(|tight| {
+            (tight..points.len().saturating_sub(ESCAPE_CLEAR))
+                .find(|&k| points[k..k + ESCAPE_CLEAR].iter().all(clear))
         });
         let mut manoeuvre = self.manoeuvre;
         if let Some(k) = out {

@@ -299,6 +299,40 @@ fn a_car_hemmed_in_at_the_margin_creeps_out_with_a_narrower_one_until_it_clears_
 }
 
 #[test]
+fn a_gap_wide_enough_for_the_car_but_not_its_margin_is_crept_through_and_left_behind() {
+    // A wall across the way with a gap 1.5 m wide: the car (1.2 m) keeps 0.15 m either
+    // side, not its 0.25 m margin. The car stands before it, its nose 0.5 m short (as far
+    // as partial manoeuvres brought it).
+    let mut posts = wall((6.0, 0.95), (6.0, 11.0), 0.2);
+    posts.extend(wall((6.0, -0.95), (6.0, -11.0), 0.2));
+    let req = ManoeuvreRequest {
+        footprint: Footprint {
+            margin: 0.25,
+            ..CAR
+        },
+        ..request([3.275, 0.0, 0.0], [12.0, 0.0, 0.0], posts)
+    };
+    // At the margin no way through (at most a partial manoeuvre short of the gap).
+    let field = req.field();
+    assert!(!matches!(req.plan(&field).0, Ok(p) if p.complete));
+    let escape = req.escape().0.expect("an escape");
+    assert_eq!(escape.escape_margin, Some(0.1));
+    let keeps = |p: &PathPoint, m: f64| {
+        req.obstacles
+            .iter()
+            .all(|o| req.footprint.distance(p.x, p.y, p.theta, o.x, o.y) > o.radius + m)
+    };
+    let points = &escape.manoeuvre.points;
+    assert!(points.iter().all(|p| keeps(p, 0.1)));
+    assert!(points.iter().any(|p| !keeps(p, 0.25)));
+    // Cut once the car is through, its rear axle past the wall, the full margin kept.
+    let end = points[points.len() - 1];
+    assert!(end.x > 6.0 && end.x < 12.0 - 0.3, "{end:?}");
+    assert!(points[points.len() - 4..].iter().all(|p| keeps(p, 0.25)));
+    assert!(!escape.complete);
+}
+
+#[test]
 fn a_car_with_room_at_the_margin_gets_no_escape() {
     let req = request([0.0, 0.0, 0.0], [12.0, 0.0, 0.0], vec![post(6.0, 0.0, 0.5)]);
     let field = req.field();
