@@ -42,12 +42,13 @@ volatile std::sig_atomic_t stopped = 0;
 using Data = std::array<uint8_t, 8>;
 enum Id : uint16_t { HEARTBEAT = 0x080, STEERING_CMD = 0x100, STEERING_REPORT = 0x101,
                      THROTTLE_CMD = 0x110, THROTTLE_REPORT = 0x111, FAULT_REPORT = 0x0F0 };
-template <class T> constexpr uint8_t crc8(const T *p, size_t n, uint8_t crc = 0xFF) {  // SAE-J1850:
-  for (size_t i = 0; i < 8 * n; ++i) {  // polynomial 0x1D, initial value 0xFF, no reflection
+// CRC-8/SAE-J1850: polynomial 0x1D, initial value 0xFF, no reflection, final XOR 0xFF.
+template <class T> constexpr uint8_t crc8(const T *p, size_t n, uint8_t crc = 0xFF) {
+  for (size_t i = 0; i < 8 * n; ++i) {
     if (i % 8 == 0) crc ^= uint8_t(p[i / 8]);
     crc = uint8_t(crc & 0x80 ? crc << 1 ^ 0x1D : crc << 1);
   }
-  return crc ^ 0xFF;  // final XOR
+  return crc ^ 0xFF;
 }
 static_assert(crc8("123456789", 9) == 0x4B, "CRC-8/SAE-J1850's check value");
 constexpr uint8_t e2e_crc(uint16_t id, const Data &d) {  // the ID (2 bytes, big-endian), bytes 0-6
@@ -76,7 +77,7 @@ static_assert(sealed(STEERING_CMD, steering_cmd(true, 12.5, 60), 3)[7] == 0x68);
 static_assert(sealed(THROTTLE_CMD, throttle_cmd(true, 1, 0, 1.5, 1), 0)[7] == 0x33);
 struct Can {
   int fd = socket(PF_CAN, SOCK_RAW, CAN_RAW);
-  std::map<int, int> counter, last;  // sent per ID; received per stream (ID, FAULT_REPORT's Source)
+  std::map<int, uint8_t> counter, last;  // sent per ID; received per stream (ID, and Source)
   long sent = 0, failed = 0, rejected = 0;
   explicit Can(const std::string &iface) {
     sockaddr_can at{AF_CAN, int(if_nametoindex(iface.c_str())), {}};
@@ -172,7 +173,6 @@ std::map<std::string, double> read_toml(const std::string &path) {  // {"table.k
 struct Pose { double x, y, th; };  // the rear axle, east/north at the datum (m), theta (rad)
 struct Arc { double k, clear; bool found; };
 using Points = std::vector<std::array<double, 2>>;  // laser points in the car's frame (x forward)
-
 Arc plan(Pose p, const Points &points, std::map<std::string, double> &m) {
   double gx = m["goal.x"], gy = m["goal.y"], least = INFINITY;
   double kmax = std::tan(std::fmin(m["vehicle.max_steer_deg"], 30) * RAD) / m["vehicle.wheelbase"];
