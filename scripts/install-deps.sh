@@ -45,6 +45,8 @@ APT_PKGS=(
     fonts-dejavu-core   # the font ugv-sim draws its figures with (plotters, ab_glyph)
     gpsd                # NMEA cross-check: sim/tests/gps_gpsd.rs runs gpsd -N -n -b on the simulated GPS pty
     gpsd-clients        # gpsfake and gpspipe: tests/tests/record.rs replays a recorded gps.nmea into gpsd
+    g++                 # the C++ example controller (examples/cpp, C++17), built by scripts/test.sh
+    make                # its Makefile
 )
 # From bookworm-backports: the machine image ships qemu-utils 10.0 from backports,
 # which Breaks bookworm's qemu-system-common 7.2 (apt would remove qemu-utils).

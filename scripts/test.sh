@@ -16,6 +16,9 @@ cargo build --workspace --all-targets --locked
 # binaries: debug builds are too slow for the 100 ms watchdogs inside an emulated VM.
 cargo build --workspace --release --locked
 export UGV_BIN_DIR="$PWD/target/release"
+# The C++ example controller (examples/cpp, run by tests/tests/vcan_cpp_example.rs):
+# built here on the host, not inside the VM, against the release build's laser shim.
+make -C examples/cpp CXXFLAGS="-O2 -g -Werror"
 
 echo "== lints and formatting"
 cargo clippy --workspace --all-targets --locked -- -D warnings

@@ -119,9 +119,11 @@ pub enum IpcOp {
     NameNode,
     /// `NodeBuilder::create`: `NodeCreationFailure`.
     CreateNode,
-    /// Opening or creating the publish-subscribe service: `PublishSubscribeOpenOrCreateError`.
+    /// Opening or creating the publish-subscribe service: `PublishSubscribeOpenOrCreateError`
+    /// (`PublishSubscribeOpenError` from `LaserSubscriber::open_existing`).
     OpenFrameService,
-    /// Opening or creating the event service: `EventOpenOrCreateError`.
+    /// Opening or creating the event service: `EventOpenOrCreateError` (`EventOpenError`
+    /// from `LaserSubscriber::open_existing`).
     OpenEventService,
     /// `PublisherCreateError`.
     CreatePublisher,

@@ -63,6 +63,30 @@ fn frames_arrive_in_order_and_intact_in_one_process() -> Result<()> {
     Ok(())
 }
 
+/// A controller of one's own opens the simulator's services and never creates them
+/// (docs/wire-contract.md): none while there is no publisher, and after one, the
+/// history frame first (handed over when the publisher next connects subscribers).
+#[test]
+fn an_open_only_subscriber_never_creates_the_service() -> Result<()> {
+    let service = unique_service("openonly");
+    ensure!(
+        LaserSubscriber::open_existing(&service)?.is_none(),
+        "opened a service no one created"
+    );
+    ensure!(
+        LaserSubscriber::open_existing(&service)?.is_none(),
+        "the first try created the service"
+    );
+    let publisher = LaserPublisher::new(&service)?;
+    publisher.publish(&make_frame(7))?;
+    let sub = LaserSubscriber::open_existing(&service)?.context("the publisher's service")?;
+    publisher.update_connections()?;
+    check(&sub.recv_timeout(WAIT)?.context("the history frame")?, 7)?;
+    publisher.publish(&make_frame(8))?;
+    check(&sub.recv_timeout(WAIT)?.context("frame 8")?, 8)?;
+    Ok(())
+}
+
 #[test]
 fn a_waiting_subscriber_wakes_when_a_frame_is_published() -> Result<()> {
     let service = unique_service("wake");

@@ -1,7 +1,8 @@
 //! A controller of one's own (examples/) in HIL: `ugv-sim run --wait-for-controller` on
 //! a vcan of the test's own, and the controller started as a user would start it, with
 //! the results directory (`wires.json`, `mission.toml`, `controller.toml`) as its last
-//! argument; what the run left, and the checks every example's test makes of it.
+//! argument; what the run left, and the checks every example's test makes of it. And the
+//! other way: `ugv-sim run --controller BINARY`, which starts it itself.
 
 use std::path::Path;
 use std::process::{Command, ExitStatus, Stdio};
@@ -181,5 +182,47 @@ pub fn drove_round_the_post_to_the_goal(run: &ForeignRun) -> Result<()> {
         ctl.contains("rejected 0"),
         "the example rejected reports:\n{ctl}"
     );
+    Ok(())
+}
+
+/// The other way an example runs: `ugv-sim run --controller BINARY` on a vcan of its own
+/// (`tag` names it), which starts the example with the project's controller command
+/// line (`run --config DIR/controller.toml --gps ...`) and ends it with SIGINT after the
+/// run. The run must pass with every frame through the ECUs' E2E checks, and the
+/// example (whose stderr is ugv-sim's, each line starting `name: `) must have enabled
+/// the ECUs, seen the run end, rejected no report and exited with status 0.
+pub fn started_by_ugv_sim_reaches_the_goal(tag: &str, binary: &Path, name: &str) -> Result<()> {
+    let vcan = TestVcan::new(tag)?;
+    let dir = tempfile::tempdir()?;
+    let run_id = format!("{tag}-{}", std::process::id());
+    let out = Command::new(workspace_bin("ugv-sim")?)
+        .args(["run", "--can", &vcan.name, "--run-id", &run_id])
+        .arg("--controller")
+        .arg(binary)
+        .arg("--results")
+        .arg(dir.path().join("results"))
+        .arg("--gps-link")
+        .arg(dir.path().join("gps"))
+        .output()
+        .context("running ugv-sim")?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    eprintln!("--- ugv-sim stderr\n{stderr}");
+    let verdict: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("the verdict on ugv-sim's stdout")?;
+    ensure!(
+        out.status.code() == Some(0),
+        "ugv-sim exit {:?}",
+        out.status
+    );
+    a_hil_run_that_passed(&verdict)?;
+    every_frame_passed_the_e2e_checks(&verdict, 500)?;
+    for line in [
+        format!("{name}: both ECUs enabled"),
+        format!("{name}: run over: "),
+        "rejected 0".to_owned(),
+        "controller finished: Some(ExitStatus(unix_wait_status(0)))".to_owned(),
+    ] {
+        ensure!(stderr.contains(&line), "no {line:?} in ugv-sim's stderr");
+    }
     Ok(())
 }

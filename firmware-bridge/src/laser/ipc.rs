@@ -21,6 +21,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use super::{IpcOp, LaserError, LaserFrame};
@@ -54,7 +56,27 @@ struct Endpoint {
     events: event::PortFactory<Svc>,
 }
 
-fn open(service: &str, node_name: &str) -> Result<Endpoint, LaserError> {
+/// How an endpoint comes by its services.
+#[derive(Clone, Copy, PartialEq)]
+enum Services {
+    /// Open them, or create them with the wire's settings (the simulator, the tools).
+    OpenOrCreate,
+    /// Open them only, as a controller of one's own must (docs/wire-contract.md).
+    Open,
+}
+
+/// Whether `error` is iceoryx2's "the service does not exist" of an [`Services::Open`].
+fn service_missing(error: &LaserError) -> bool {
+    let LaserError::Ipc { source, .. } = error else {
+        return false;
+    };
+    matches!(
+        source.downcast_ref(),
+        Some(PublishSubscribeOpenError::DoesNotExist)
+    ) || matches!(source.downcast_ref(), Some(EventOpenError::DoesNotExist))
+}
+
+fn open(service: &str, node_name: &str, how: Services) -> Result<Endpoint, LaserError> {
     let name = ServiceName::new(service).map_err(|source| LaserError::ServiceName {
         name: service.to_owned(),
         source,
@@ -80,14 +102,24 @@ fn open(service: &str, node_name: &str) -> Result<Endpoint, LaserError> {
         .history_size(HISTORY)
         .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
         .max_subscribers(MAX_SUBSCRIBERS)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| ipc_err(service, IpcOp::OpenFrameService, e))?;
-    let events = node
-        .service_builder(&name)
-        .event()
-        .open_or_create()
-        .map_err(|e| ipc_err(service, IpcOp::OpenEventService, e))?;
+        .enable_safe_overflow(true);
+    let frames = match how {
+        Services::OpenOrCreate => frames
+            .open_or_create()
+            .map_err(|e| ipc_err(service, IpcOp::OpenFrameService, e)),
+        Services::Open => frames
+            .open()
+            .map_err(|e| ipc_err(service, IpcOp::OpenFrameService, e)),
+    }?;
+    let events = node.service_builder(&name).event();
+    let events = match how {
+        Services::OpenOrCreate => events
+            .open_or_create()
+            .map_err(|e| ipc_err(service, IpcOp::OpenEventService, e)),
+        Services::Open => events
+            .open()
+            .map_err(|e| ipc_err(service, IpcOp::OpenEventService, e)),
+    }?;
     Ok(Endpoint {
         node,
         frames,
@@ -116,7 +148,7 @@ impl LaserPublisher {
     /// Open (or create) the service `service_name` (see [`super::service_name`]) and
     /// a publisher on it.
     pub fn new(service_name: &str) -> Result<LaserPublisher, LaserError> {
-        let endpoint = open(service_name, "ugv-laser-publisher")?;
+        let endpoint = open(service_name, "ugv-laser-publisher", Services::OpenOrCreate)?;
         let publisher = endpoint
             .frames
             .publisher_builder()
@@ -189,7 +221,21 @@ impl LaserSubscriber {
     /// Open (or create) the service `service_name` and a subscriber on it. It may start
     /// before the publisher; once connected it gets the latest frame (history) first.
     pub fn new(service_name: &str) -> Result<LaserSubscriber, LaserError> {
-        let endpoint = open(service_name, "ugv-laser-subscriber")?;
+        Self::subscribe(service_name, Services::OpenOrCreate)
+    }
+
+    /// Open the publisher's service `service_name` and a subscriber on it, never
+    /// creating it (a controller must not: docs/wire-contract.md); `Ok(None)` while the
+    /// service does not exist.
+    pub fn open_existing(service_name: &str) -> Result<Option<LaserSubscriber>, LaserError> {
+        match Self::subscribe(service_name, Services::Open) {
+            Err(e) if service_missing(&e) => Ok(None),
+            opened => opened.map(Some),
+        }
+    }
+
+    fn subscribe(service_name: &str, how: Services) -> Result<LaserSubscriber, LaserError> {
+        let endpoint = open(service_name, "ugv-laser-subscriber", how)?;
         let subscriber = endpoint
             .frames
             .subscriber_builder()
