@@ -60,7 +60,7 @@ pub struct Vehicle {
     pub speed_time_constant_s: f64,
     /// Deceleration at full brake, m/s^2, as measured on the car: what a stop that
     /// the speed loop alone cannot make in time brakes with, and what the actuator
-    /// monitor expects of a commanded brake (`monitor.rs`).
+    /// monitor expects of a commanded brake (`safety/monitor.rs`).
     pub brake_decel: f64,
 }
 

@@ -22,7 +22,7 @@ use firmware_bridge::lockstep::{
 };
 use firmware_bridge::nmea::ReadEvent;
 
-use crate::core::COMMAND_PERIOD;
+use crate::control::COMMAND_PERIOD;
 use crate::runtime::{GpsInput, InputError};
 
 /// How long the loop waits for the simulator's next tick before it takes the

@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! ugv-controller run --config mission.toml --gps /dev/ttyUSB0 --laser SERVICE --can can0
-//! ugv-controller run ... --log logs/today      and record its ports (replay: ugv-sim replay)
+//! ugv-controller run ... --record logs/today   and record its ports (replay: ugv-sim replay)
+//! ugv-controller run ... --training-csv t.csv  and write the ANFIS training data
 //! ugv-controller run ... --lockstep ugv-hil/RUN/clock   on the simulator's clock
 //! ugv-controller plan [problem.json]        one planning step, JSON in and out
 //! ugv-controller anfis train --data runs.csv --target steer_cmd --output model.json
@@ -29,7 +30,7 @@ use firmware_bridge::laser::LaserSubscriber;
 use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
-use ugv_controller::core::{COMMAND_PERIOD, Controller, Mode};
+use ugv_controller::control::{COMMAND_PERIOD, Controller, Mode};
 use ugv_controller::lockstep::{GatedGps, SimClock};
 use ugv_controller::record::{RunInfo, Writer};
 use ugv_controller::runtime::{Exit, GpsInput, LaserInput, Runtime, SIMULATOR_PID_ENV};
@@ -51,8 +52,8 @@ enum Command {
     /// Drive the mission: GPS from a serial port, laser frames from iceoryx2, the
     /// steering and throttle ECUs over SocketCAN.
     Run(RunArgs),
-    /// One planning step of the bare method (README: "The plan subcommand"): a JSON
-    /// problem from a file or stdin, the JSON result on stdout.
+    /// One planning step of the bare method (docs/controller.md, "The plan
+    /// subcommand"): a JSON problem from a file or stdin, the JSON result on stdout.
     Plan {
         /// Problem file; stdin when absent or `-`.
         input: Option<PathBuf>,
@@ -93,16 +94,19 @@ struct RunArgs {
     /// drives (flushed every second and at every change of mode).
     #[arg(long)]
     trace: Option<PathBuf>,
-    /// Write the follower's training data (CSV: e_y, e_theta, phi_ref, steer_cmd) while
-    /// it drives.
-    #[arg(long)]
-    record: Option<PathBuf>,
+    /// Write the follower's ANFIS training data (CSV: e_y, e_theta, phi_ref,
+    /// steer_cmd) while it drives, for `anfis train --data`.
+    #[arg(long, value_name = "FILE")]
+    training_csv: Option<PathBuf>,
     /// Record what crosses the controller's ports into this directory (created if
     /// missing) as it drives: run.mcap (every input at the tick that took it, every
     /// frame sent, the controller's state and paths), bus.log (candump -l) and
     /// gps.nmea (the raw line), for Foxglove and for `ugv-sim replay`.
-    #[arg(long, value_name = "DIR")]
-    log: Option<PathBuf>,
+    //
+    // `--log DIR`, its name before issue 33, is taken for one more release, out of the
+    // help; `--record FILE.csv`, what it meant then, is refused (`recording_dir`).
+    #[arg(long, value_name = "DIR", alias = "log", value_parser = recording_dir)]
+    record: Option<PathBuf>,
     /// Seconds between status lines (0: none).
     #[arg(long, default_value_t = 1.0)]
     status_every: f64,
@@ -117,6 +121,23 @@ struct RunArgs {
     /// deterministic. docs/wire-contract.md, "Lockstep".
     #[arg(long, value_name = "SERVICE")]
     lockstep: Option<String>,
+}
+
+/// `--record DIR`: a folder for the recording. A file name ending in `.csv` is what
+/// `--record` meant before it named the recording: the training CSV, now
+/// `--training-csv`.
+fn recording_dir(value: &str) -> Result<PathBuf, String> {
+    if Path::new(value)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+    {
+        return Err(format!(
+            "{value} looks like a CSV file: --record DIR now records the controller's \
+             ports into a folder; the ANFIS training data (what --record FILE wrote \
+             before) is --training-csv FILE"
+        ));
+    }
+    Ok(PathBuf::from(value))
 }
 
 #[derive(Subcommand, Debug)]
@@ -177,7 +198,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             let problem: ugv_controller::planner::PlanProblem = serde_json::from_str(&text)
-                .context("the planning problem (see the README for its schema)")?;
+                .context("the planning problem (see docs/controller.md for its schema)")?;
             let result = ugv_controller::planner::plan(&problem)?;
             println!("{}", serde_json::to_string_pretty(&result)?);
             Ok(ExitCode::SUCCESS)
@@ -266,8 +287,8 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         "{}",
         rt_sched.promotion.describe("ugv-controller: command loop")
     );
-    if let Some(dir) = &args.log {
-        rt = with_log(rt, dir, &args, &cfg)?;
+    if let Some(dir) = &args.record {
+        rt = with_recording(rt, dir, &args, &cfg)?;
     }
     let mut log = LoopLog::new(args.status_every);
     let exit = match &mut lockstep {
@@ -323,16 +344,17 @@ fn run_config(args: &RunArgs) -> Result<ControllerConfig> {
     Ok(cfg)
 }
 
-/// The writer of `--trace` and `--record`, their files created (none without either).
+/// The writer of `--trace` and `--training-csv`, their files created (none without
+/// either).
 fn trace_writer(args: &RunArgs) -> Result<Option<TraceWriter>> {
     let create =
         |p: &PathBuf| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
-    Ok(match (&args.trace, &args.record) {
+    Ok(match (&args.trace, &args.training_csv) {
         (None, None) => None,
-        (trace, record) => Some(
+        (trace, training_csv) => Some(
             TraceWriter::new(
                 trace.as_ref().map(create).transpose()?,
-                record.as_ref().map(create).transpose()?,
+                training_csv.as_ref().map(create).transpose()?,
             )
             .context("writing the trace")?,
         ),
@@ -372,15 +394,16 @@ fn open_ports(
     Ok((can, gps, laser))
 }
 
-/// `rt` recording its ports into `dir` (`--log`), the folder created; the recording's
-/// start is now, the loop's t = 0.
-fn with_log<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
+/// `rt` recording its ports into `dir` (`--record`), the folder created; the
+/// recording's start is now, the loop's t = 0.
+fn with_recording<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
     rt: Runtime<G, L, B>,
     dir: &Path,
     args: &RunArgs,
     cfg: &ControllerConfig,
 ) -> Result<Runtime<G, L, B>> {
-    std::fs::create_dir_all(dir).with_context(|| format!("--log: creating {}", dir.display()))?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("--record: creating {}", dir.display()))?;
     let info = RunInfo::field(
         args.config.as_ref().map_or_else(
             || "the paper's mission (default configuration)".to_owned(),
@@ -394,9 +417,9 @@ fn with_log<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
         cfg,
     )?;
     let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
-        .with_context(|| format!("--log: recording into {}", dir.display()))?;
+        .with_context(|| format!("--record: recording into {}", dir.display()))?;
     rt.with_recorder(writer)
-        .context("--log: starting the recorder's thread")
+        .context("--record: starting the recorder's thread")
 }
 
 /// The command loop's lines on stderr. Every change of mode, and of stopping or moving

@@ -1,6 +1,6 @@
 //! Recordings in formats others read: one writer for the simulator's recording of
 //! every run (`ugv-sim run`, which adds the world's topics to it) and the
-//! controller's own (`ugv-controller run --log DIR`, on the car or on the bench).
+//! controller's own (`ugv-controller run --record DIR`, on the car or on the bench).
 //!
 //! - `run.mcap` (Foxglove SDK, its built-in schemas): the laser as
 //!   `foxglove.LaserScan`, every CAN frame raw and decoded per golf_car.dbc (JSON), the
@@ -43,7 +43,7 @@ use golf_car_can::spec::NetworkSpec;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::core::{Controller, Mode};
+use crate::control::{Controller, Mode};
 
 /// The recording's file names in its directory.
 pub const MCAP_FILE: &str = "run.mcap";
@@ -105,7 +105,7 @@ pub enum RecordMode {
     /// The simulator's, of a lockstep HIL run (the controller binary on the
     /// simulator's clock): every input at the tick that took it, as in SIL.
     Lockstep,
-    /// The controller binary's own (`ugv-controller run --log`): on the car, on the
+    /// The controller binary's own (`ugv-controller run --record`): on the car, on the
     /// bench, or beside a HIL run.
     Field,
 }
@@ -155,7 +155,7 @@ impl RunInfo {
         Ok(RunInfo {
             mode: RecordMode::Field,
             scenario: label,
-            physics_hz: 1.0 / crate::core::COMMAND_PERIOD,
+            physics_hz: 1.0 / crate::control::COMMAND_PERIOD,
             epoch_unix_ns,
             can_interface,
             gps_sentences,

@@ -28,7 +28,7 @@ use golf_car_can::{
 use serde::Serialize;
 use serde_json::json;
 
-use crate::core::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
+use crate::control::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
 use crate::record::{BackgroundWriter, RecordSummary, Writer, topics};
 use crate::trace::{FixTiming, Trace, TraceWriter};
 
@@ -263,7 +263,7 @@ pub struct Runtime<G, L, B> {
     next_heartbeat: f64,
     trace: Option<TraceWriter>,
     trace_error: Option<String>,
-    /// The controller's own recording (`run --log`), when made: written on a thread
+    /// The controller's own recording (`run --record`), when made: written on a thread
     /// of its own.
     recorder: Option<BackgroundWriter>,
     /// Fix timings on the monotonic clock (the binary on the wires), when kept.

@@ -12,7 +12,7 @@ use std::io::Write;
 
 use serde::Serialize;
 
-use crate::core::{Controller, Mode, Sample};
+use crate::control::{Controller, Mode, Sample};
 use crate::guidance::{Circle, PlanRecord};
 
 #[derive(Clone, Debug, Serialize, serde::Deserialize)]

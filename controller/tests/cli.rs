@@ -68,3 +68,43 @@ fn anfis_train_huge_epochs_and_mfs_are_refused_not_a_panic_or_an_abort() {
     let (code, stderr) = train(dir.path(), &["--mfs", "2", "--epochs", "3"]);
     assert_eq!(code, Some(0), "{stderr}");
 }
+
+/// `run`'s output flags say what they write (issue 33): `--record DIR` the recording of
+/// its ports (`--log DIR`, its old name, still taken, out of the help),
+/// `--training-csv FILE` the ANFIS training data; a `--record` given a CSV file, what
+/// it wrote before, is refused at parse time with a pointer to `--training-csv`.
+#[test]
+fn run_names_the_recording_record_and_the_training_data_training_csv() {
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_ugv-controller"))
+            .arg("run")
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, help, _) = run(&["--help"]);
+    assert_eq!(code, Some(0));
+    assert!(help.contains("--record <DIR>"), "{help}");
+    assert!(help.contains("--training-csv <FILE>"), "{help}");
+    assert!(!help.contains("--log"), "{help}");
+    let wires = ["--gps", "/nonexistent/gps", "--laser", "x"];
+    let (code, _, stderr) = run(&[&wires[..], &["--record", "train.csv"]].concat());
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("train.csv") && stderr.contains("--training-csv FILE"),
+        "{stderr}"
+    );
+    // The old name parses (and the run then fails later, on the GPS device).
+    for args in [["--log", "rec"], ["--record", "rec"]] {
+        let (code, _, stderr) = run(&[&wires[..], &args].concat());
+        assert!(
+            !stderr.contains("unexpected argument") && code != Some(2),
+            "{args:?}: {code:?} {stderr}"
+        );
+    }
+}

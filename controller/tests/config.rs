@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use ugv_controller::config::{ConfigError, ControllerConfig};
-use ugv_controller::core::{Controller, ControllerError};
+use ugv_controller::control::{Controller, ControllerError};
 
 /// Every floating-point field of the configuration, as its dotted path.
 fn float_fields() -> Vec<Vec<String>> {

@@ -15,7 +15,7 @@ use golf_car_can::{
     ThrottleCmdGear, ThrottleReport, ThrottleReportFault, ThrottleReportGear,
 };
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::{Controller, Mode};
+use ugv_controller::control::{Controller, Mode};
 use ugv_controller::perception::Scan;
 
 struct Rig {

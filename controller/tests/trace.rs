@@ -7,7 +7,7 @@
 use std::io::Write;
 
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::{Controller, Sample};
+use ugv_controller::control::{Controller, Sample};
 use ugv_controller::guidance::FollowInputs;
 use ugv_controller::localisation::Pose;
 use ugv_controller::trace::{TRACE_FLUSH_PERIOD, Trace, TraceWriter};

@@ -2,7 +2,7 @@
 //! run --config` and `check-config` load.
 
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::Controller;
+use ugv_controller::control::Controller;
 
 /// `controller_config`: the bytes as a configuration file (read as UTF-8 text, then
 /// `ControllerConfig::from_toml`, which parses and validates).

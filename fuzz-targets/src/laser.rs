@@ -1,9 +1,9 @@
 //! Laser frames from shared memory: `LaserSubscriber::try_recv` copies the `repr(C)`
 //! frame out of the sample and calls `LaserFrame::validate`; the controller then reads
-//! it through `core::scan_of` into perception.
+//! it through `control::scan_of` into perception.
 
 use firmware_bridge::laser::{LASER_FRAME_VERSION, LaserFrame, MAX_BEAMS};
-use ugv_controller::core::scan_of;
+use ugv_controller::control::scan_of;
 use ugv_controller::perception::{Perception, PerceptionConfig, Pose2};
 
 /// Bytes of the `repr(C)` frame: version, count (u32), sequence, stamp_ns (u64), six

@@ -1,4 +1,4 @@
-//! What the controller's own recording (`ugv-controller run --log`) costs its loop,
+//! What the controller's own recording (`ugv-controller run --record`) costs its loop,
 //! natively: the paper's scenario in SIL, its controller's loop recording into a
 //! temporary directory or not, alternately, five times each. Prints the wall time per
 //! run, the extra per controller tick, and the recording's size per simulated minute.
@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use ugv_controller::config::FollowerKind;
-use ugv_controller::core::COMMAND_PERIOD;
+use ugv_controller::control::COMMAND_PERIOD;
 use ugv_controller::record::{MCAP_FILE, RunInfo, Writer};
 use ugv_sim::mission::controller_config;
 use ugv_sim::scenario::Scenario;

@@ -59,7 +59,8 @@ fn bench(name: &str, s: &Scenario, x: f64, y: f64, theta: f64) {
     };
     let beams = dev.spec().beams();
     let range_max = dev.spec().range_max;
-    let (sx, sy, heading) = dev.scanner_pose(x, y, theta);
+    let pose = dev.scanner_pose(x, y, theta);
+    let (sx, sy, heading) = (pose.x, pose.y, pose.heading_rad);
 
     // Raw ray casts, beams swept like a scan.
     let step = dev.spec().resolution_deg.to_radians();

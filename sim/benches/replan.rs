@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use ugv_controller::config::FollowerKind;
-use ugv_controller::core::Mode;
+use ugv_controller::control::Mode;
 use ugv_controller::guidance::solve;
 use ugv_sim::mission::checked_controller_config;
 use ugv_sim::scenario::Scenario;

@@ -96,7 +96,7 @@ enum Command {
     },
     /// Replay a recording (run.mcap) into the controller library in lockstep and
     /// compare its commands with the recorded ones: exactly for a SIL recording,
-    /// within the HIL tolerance for a HIL one (see the README). Prints the report as
+    /// within the HIL tolerance for a HIL one (see docs/recording.md). Prints the report as
     /// JSON. Exit code 0 when they agree, 1 at a divergence, 3 when the recording is
     /// damaged or invalid (a record fails its CRC or its lengths, a message's time lies
     /// outside the run, a channel or metadata the replay needs is missing or invalid:
@@ -222,7 +222,7 @@ struct RunArgs {
     #[arg(long)]
     can: Option<String>,
     /// A bench file: a `[devices]` section saying which devices are physical and
-    /// where (overrides the scenario's); see the README.
+    /// where (overrides the scenario's); see docs/devices.md.
     #[arg(long, value_name = "FILE")]
     devices: Option<PathBuf>,
     /// End the run after this many seconds, 0.001 to 86400 (overrides
@@ -232,15 +232,15 @@ struct RunArgs {
     /// Directory for verdict.json, trace.json, figure.svg and figure.png.
     #[arg(long, default_value = "results")]
     results: PathBuf,
-    /// Start this controller binary with the wire locations (HIL); see the README
-    /// for the command line it is given.
+    /// Start this controller binary with the wire locations (HIL); see
+    /// docs/wire-contract.md for the command line it is given.
     #[arg(long, value_name = "BINARY")]
     controller: Option<PathBuf>,
     /// Extra arguments for the controller binary (repeatable).
     #[arg(long = "controller-arg", allow_hyphen_values = true)]
     controller_args: Vec<String>,
     /// Have the controller started with --controller record its own ports into
-    /// RESULTS/controller (`ugv-controller run --log`), a recording that replays byte
+    /// RESULTS/controller (`ugv-controller run --record`), a recording that replays byte
     /// for byte; off by default, since it adds the controller's share of encoding and
     /// writing to the machine.
     #[arg(long, requires = "controller")]
@@ -281,11 +281,11 @@ struct RunArgs {
     #[arg(long)]
     isolate: bool,
     /// A fault plan (`[[faults]]` and `[expect]`, as in a scenario) added to the
-    /// scenario's own; see the README's fault injection.
+    /// scenario's own; see docs/faults.md.
     #[arg(long, value_name = "FILE")]
     faults: Option<PathBuf>,
     /// Do not record the run (by default run.mcap, bus.log and gps.nmea go into the
-    /// results directory; see the README).
+    /// results directory; see docs/recording.md).
     #[arg(long)]
     no_record: bool,
     /// SIL only: at most this many times faster than real time (1: real time), 0.01

@@ -261,8 +261,9 @@ impl<B: Can + QueueDrops> Sim<B> {
         }
         self.steering.step(now, self.dt);
         self.throttle.step(now, self.dt);
-        let (phi, rate) = self.steering.actuator();
-        let (v, _) = self.throttle.actuator();
+        let steering = self.steering.actuator();
+        let (phi, rate) = (steering.angle_rad, steering.rate_deg_s);
+        let v = self.throttle.actuator().speed_m_s;
         self.max_steer_deg = self.max_steer_deg.max(phi.to_degrees().abs());
         self.max_steer_rate_deg_s = self.max_steer_rate_deg_s.max(rate.abs());
         if now > 0.0 {
@@ -296,9 +297,9 @@ impl<B: Can + QueueDrops> Sim<B> {
         let faults = &mut self.faults;
         if let Some(gps) = &mut self.gps {
             if !faults.is_empty() {
-                let (fix, (east, north)) = faults.gps_receiver(now);
-                gps.set_fix_override(fix);
-                gps.set_position_offset(east, north);
+                let receiver = faults.gps_receiver(now);
+                gps.set_fix_override(receiver.fix);
+                gps.set_position_offset(receiver.east_m, receiver.north_m);
             }
             self.outputs.gps = faults.gps(now, gps.poll(now, &self.vehicle)?);
         }

@@ -7,7 +7,7 @@ use firmware_bridge::can::membus::{MemBus, MemEndpoint};
 use firmware_bridge::nmea::ReaderConfig;
 use firmware_bridge::{BridgeError, CanPort};
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::{COMMAND_PERIOD, Controller, ControllerError};
+use ugv_controller::control::{COMMAND_PERIOD, Controller, ControllerError};
 use ugv_controller::runtime::{Exit, InputStats, MemGps, MemLaser, Runtime, accept_controller_ids};
 use ugv_controller::trace::Trace;
 

@@ -17,7 +17,7 @@ mod clearance;
 pub mod ray;
 
 pub use clearance::Clearances;
-use ray::{Fan, Form, Hit, Prim};
+use ray::{Fan, Form, Hit, Prim, ScannerPose};
 
 /// One obstacle of the scenario in the physics world.
 #[derive(Debug)]
@@ -245,7 +245,7 @@ impl World {
 
     /// Every beam of `fan` from the scanner pose `(x, y, heading)` up to `max_range`:
     /// `hits[i]` is beam `i`'s range and obstacle (`f64::INFINITY` for no return).
-    pub fn scan(&self, pose: (f64, f64, f64), fan: &Fan, max_range: f64, hits: &mut Vec<Hit>) {
+    pub fn scan(&self, pose: ScannerPose, fan: &Fan, max_range: f64, hits: &mut Vec<Hit>) {
         ray::scan(&self.prims, fan, pose, max_range, hits);
     }
 }

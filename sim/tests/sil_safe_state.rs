@@ -7,7 +7,7 @@
 
 use firmware_bridge::laser::LaserFrame;
 use ugv_controller::config::FollowerKind;
-use ugv_controller::core::Mode;
+use ugv_controller::control::Mode;
 use ugv_controller::runtime::Exit;
 use ugv_sim::Outcome;
 use ugv_sim::mission::controller_config;

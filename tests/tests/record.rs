@@ -245,7 +245,7 @@ fn a_sil_recording_replays_byte_for_byte() {
     );
 }
 
-/// The controller's own recording (`ugv-controller run --log`), made by the library's
+/// The controller's own recording (`ugv-controller run --record`), made by the library's
 /// loop in a SIL run that replans on the binary's planning thread: SIL's ticks take
 /// microseconds, so the thread's paths come back a varying number of ticks later, as
 /// they do on a loaded machine. The recording keeps every input at the tick that
@@ -291,7 +291,7 @@ fn the_controllers_own_recording_replays_byte_for_byte_despite_its_planning_thre
         .filter(|m| m.channel.topic == topics::CONTROLLER_PLANNING)
         .map(|m| (m.log_time - run.sim.scenario.sim.epoch.unix_ns()) as f64 * 1e-9)
         .collect();
-    let tick = ugv_controller::core::COMMAND_PERIOD;
+    let tick = ugv_controller::control::COMMAND_PERIOD;
     let delays: Vec<f64> = run
         .trace
         .plans

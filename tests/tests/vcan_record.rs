@@ -3,7 +3,7 @@
 //! the kernel's receive timestamps and run.mcap with the wall clock alongside, and
 //! `ugv-sim replay` finds its commands within the HIL tolerance (the figures it
 //! prints are the ones the README's tolerance should be checked against), while the
-//! controller's own recording of the same run (`ugv-controller run --log`) replays
+//! controller's own recording of the same run (`ugv-controller run --record`) replays
 //! byte for byte.
 //!
 //! Needs vcan (fails loudly without it); the README's test command runs it natively
@@ -140,7 +140,7 @@ fn a_hil_recording_has_kernel_timestamps_and_replays_from_the_controllers_start(
     // The replay: the controller library fed the recording from the moment the
     // recorded controller started (its process, after the simulator's), to the end.
     replay_hil_recording(&results, 0.0..10.0)?;
-    // The controller's own recording of the same run (`run --log`): every input at
+    // The controller's own recording of the same run (`run --record`): every input at
     // the tick that took it, the ticks it skipped and took its paths at, so it
     // replays byte for byte however the guest stalled.
     let out = Command::new(workspace_bin("ugv-sim")?)

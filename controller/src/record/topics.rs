@@ -32,7 +32,7 @@ pub const CAN_DECODED: &str = "/can/decoded";
 pub const CONTROLLER_STATE: &str = "/controller/state";
 /// JSON `{"taken": n}`: the controller's loop took its n-th replanning from its
 /// planning thread at this tick (the controller's own recording, `ugv-controller run
-/// --log`), so that a replay takes each at the same tick.
+/// --record`), so that a replay takes each at the same tick.
 pub const CONTROLLER_PLANNING: &str = "/controller/planning";
 /// JSON `{"ticks": n}`: the controller's loop came late and skipped n ticks from this
 /// one on (the controller's own recording).

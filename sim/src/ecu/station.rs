@@ -65,10 +65,12 @@ enum Twin {
 struct Reported {
     reports: u64,
     enabled: bool,
-    /// Road-wheel angle (rad) or wheel speed (m/s).
-    value: f64,
-    /// Steering rate, deg/s.
+    /// Road-wheel angle (a steering ECU's).
+    angle_rad: f64,
+    /// Steering rate (a steering ECU's).
     rate_deg_s: f64,
+    /// Wheel speed (a throttle ECU's).
+    speed_m_s: f64,
 }
 
 impl Reported {
@@ -77,12 +79,12 @@ impl Reported {
         match (kind, message) {
             (EcuKind::Steering, M::SteeringReport(r)) => {
                 self.enabled = r.enabled;
-                self.value = r.angle.to_radians();
+                self.angle_rad = r.angle.to_radians();
                 self.rate_deg_s = r.rate;
             }
             (EcuKind::Throttle, M::ThrottleReport(r)) => {
                 self.enabled = r.enabled;
-                self.value = r.wheel_speed;
+                self.speed_m_s = r.wheel_speed;
             }
             _ => return,
         }
@@ -367,17 +369,39 @@ impl<B: Can + QueueDrops> Station<B> {
         }
     }
 
-    /// The actuator's position: road-wheel angle (rad) and rate (deg/s), or wheel
-    /// speed (m/s) and 0.
-    pub fn actuator(&self) -> (f64, f64) {
+    /// What the actuator does: a steering ECU's road-wheel angle and rate, a throttle
+    /// ECU's wheel speed (the other ECU's quantities zero).
+    pub fn actuator(&self) -> ActuatorReading {
         match &self.twin {
             Twin::Simulated(node) => match &node.ecu {
-                Ecu::Steering(e) => (e.angle(), e.rate_deg_s()),
-                Ecu::Throttle(e) => (e.speed(), 0.0),
+                Ecu::Steering(e) => ActuatorReading {
+                    angle_rad: e.angle(),
+                    rate_deg_s: e.rate_deg_s(),
+                    ..ActuatorReading::default()
+                },
+                Ecu::Throttle(e) => ActuatorReading {
+                    speed_m_s: e.speed(),
+                    ..ActuatorReading::default()
+                },
             },
-            Twin::Physical(r) => (r.value, r.rate_deg_s),
+            Twin::Physical(r) => ActuatorReading {
+                angle_rad: r.angle_rad,
+                rate_deg_s: r.rate_deg_s,
+                speed_m_s: r.speed_m_s,
+            },
         }
     }
+}
+
+/// What an ECU's actuator does ([`Station::actuator`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ActuatorReading {
+    /// The steering's road-wheel angle.
+    pub angle_rad: f64,
+    /// The steering's rate.
+    pub rate_deg_s: f64,
+    /// The drive's wheel speed.
+    pub speed_m_s: f64,
 }
 
 /// A standalone ECU's state for status lines.
@@ -414,14 +438,14 @@ pub fn run_standalone<B: Can + QueueDrops>(
     let every = ((status_every / dt).round() as u64).max(1);
     let snapshot = |station: &Station<B>, now: f64| {
         let (enabled, fault) = station.state();
-        let (value, _) = station.actuator();
+        let actuator = station.actuator();
         StandaloneStatus {
             time: now,
             enabled,
             fault,
             value: match kind {
-                EcuKind::Steering => value.to_degrees(),
-                EcuKind::Throttle => value,
+                EcuKind::Steering => actuator.angle_rad.to_degrees(),
+                EcuKind::Throttle => actuator.speed_m_s,
             },
             stats: station.stats(),
         }
@@ -551,7 +575,7 @@ mod tests {
             b.step(true, false);
         }
         assert!(b.station.state().0, "enabled before the forger");
-        let before = b.station.actuator().0.to_degrees();
+        let before = b.station.actuator().angle_rad.to_degrees();
         for _ in 0..100 {
             b.step(true, true);
         }
@@ -562,7 +586,7 @@ mod tests {
         assert_eq!(stats.e2e.second_sender, 1, "{stats:?}");
         assert_eq!(stats.safe_state_trips[Cause::SecondSender as usize], 1);
         // Found within a few frames: the wheels barely moved towards the forged 35 deg.
-        let angle = b.station.actuator().0.to_degrees();
+        let angle = b.station.actuator().angle_rad.to_degrees();
         eprintln!("wheels {before:.2} -> {angle:.2} deg before the safe state");
         assert!(angle - before < 3.0, "{before} -> {angle}");
         let reports = b.fault_reports();

@@ -48,6 +48,15 @@ pub struct ActuatorFaults {
     pub throttle_code: Option<EcuFaultCode>,
 }
 
+/// The GPS receiver faults in force: the fix kind forced, and the reported position's
+/// offset.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpsReceiverFaults {
+    pub fix: Option<FixKind>,
+    pub east_m: f64,
+    pub north_m: f64,
+}
+
 /// What the controller's process is made to do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ProcessFault {
@@ -195,22 +204,20 @@ impl Injector {
         a
     }
 
-    /// The receiver's state at `now`: the fix kind forced, and the position offset
-    /// (east, north, metres).
-    pub fn gps_receiver(&self, now: f64) -> (Option<FixKind>, (f64, f64)) {
-        let mut fix = None;
-        let mut offset = (0.0, 0.0);
+    /// The receiver's state at `now`: the fix kind forced, and the position offset.
+    pub fn gps_receiver(&self, now: f64) -> GpsReceiverFaults {
+        let mut receiver = GpsReceiverFaults::default();
         for (_, k) in self.active(now) {
             match *k {
-                FaultKind::GpsQuality { fix: f } => fix = Some(f),
+                FaultKind::GpsQuality { fix: f } => receiver.fix = Some(f),
                 FaultKind::GpsJump { east_m, north_m } => {
-                    offset.0 += east_m;
-                    offset.1 += north_m;
+                    receiver.east_m += east_m;
+                    receiver.north_m += north_m;
                 }
                 _ => {}
             }
         }
-        (fix, offset)
+        receiver
     }
 
     /// What the faults in force do to a frame the ECU `node` sends at `now`.

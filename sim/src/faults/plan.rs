@@ -1,9 +1,8 @@
-//! The fault plan of a scenario: `[[faults]]`, each with a start (a time, or a distance
-//! travelled), an optional duration and the parameters of its kind, and `[expect]`,
-//! what must follow. Written flat in TOML (one table per fault, its parameters beside
-//! `kind`) and turned into typed [`Fault`]s when the scenario is validated, so an
-//! unknown key, a parameter of another kind or a value out of range is refused with its
-//! file, line and field.
+//! The fault plan of a scenario, `[[faults]]` and `[expect]` (the format and every kind:
+//! docs/faults.md): read flat from TOML ([`FaultSpec`], one table per fault, its
+//! parameters beside `kind`) and turned into typed [`Fault`]s when the scenario is
+//! validated, so an unknown key, a parameter of another kind or a value out of range is
+//! refused with its file, line and field.
 
 use serde::{Deserialize, Serialize};
 use ugv_fields::{FieldError, FieldPath, parse_toml, positive_up_to, read_file, within};

@@ -19,7 +19,7 @@ use firmware_bridge::clock::monotonic_ns;
 use firmware_bridge::lockstep::{
     ClockAck, ClockError, ClockLeader, ClockTick, PHASE_END, PHASE_START, PHASE_TICK,
 };
-use ugv_controller::core::COMMAND_PERIOD;
+use ugv_controller::control::COMMAND_PERIOD;
 
 use super::process::ControllerProcess;
 use super::{EcuSocket, HilError, Wires, signal_process_fault, stopped_by_signal};

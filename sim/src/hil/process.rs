@@ -126,21 +126,24 @@ pub struct ControllerProcess {
 }
 
 /// Start `binary run --config CONFIG --gps LINK --baud BAUD --laser SERVICE --can IFACE
-/// --trace TRACE [--log LOG] [--lockstep CLOCK] [extra...]` (the controller contract, README). `log` is
-/// left out when `extra` names a `--log` of its own.
+/// --trace TRACE [--record DIR] [--lockstep CLOCK] [extra...]` (the controller contract,
+/// docs/wire-contract.md). `record` is left out when `extra` names a recording of its
+/// own (`--record`, or its old name `--log`).
 pub fn spawn_controller(
     binary: &Path,
     config: &Path,
     wires: &WireMap,
     trace: &Path,
-    log: Option<&Path>,
+    record: Option<&Path>,
     extra: &[String],
 ) -> Result<ControllerProcess, HilError> {
-    let own_log = extra
-        .iter()
-        .any(|a| a == "--log" || a.starts_with("--log="));
-    let log: Vec<&std::ffi::OsStr> = match log {
-        Some(dir) if !own_log => vec!["--log".as_ref(), dir.as_os_str()],
+    let own_recording = extra.iter().any(|a| {
+        ["--record", "--log"]
+            .iter()
+            .any(|flag| a == flag || a.starts_with(&format!("{flag}=")))
+    });
+    let record: Vec<&std::ffi::OsStr> = match record {
+        Some(dir) if !own_recording => vec!["--record".as_ref(), dir.as_os_str()],
         _ => Vec::new(),
     };
     close_on_exec_all().map_err(|source| HilError::Spawn {
@@ -164,7 +167,7 @@ pub fn spawn_controller(
         ])
         .arg("--trace")
         .arg(trace)
-        .args(log)
+        .args(record)
         .args(
             wires
                 .clock_service

@@ -165,15 +165,23 @@ impl Fan {
 /// The nearest hit of a beam: range and obstacle (`f64::INFINITY` for none).
 pub type Hit = (f64, usize);
 
-/// One scan from `(ox, oy)` facing `heading` (radians) up to `range_max` against
-/// `prims`: `hits[i]` is beam `i`'s nearest hit (`hits` is resized to the fan).
-pub fn scan(
-    prims: &[Prim],
-    fan: &Fan,
-    (ox, oy, heading): (f64, f64, f64),
-    range_max: f64,
-    hits: &mut Vec<Hit>,
-) {
+/// Where a scan is taken from, in the world frame: the scanner's position (metres)
+/// and its forward direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScannerPose {
+    pub x: f64,
+    pub y: f64,
+    pub heading_rad: f64,
+}
+
+/// One scan from `pose` up to `range_max` against `prims`: `hits[i]` is beam `i`'s
+/// nearest hit (`hits` is resized to the fan).
+pub fn scan(prims: &[Prim], fan: &Fan, pose: ScannerPose, range_max: f64, hits: &mut Vec<Hit>) {
+    let ScannerPose {
+        x: ox,
+        y: oy,
+        heading_rad: heading,
+    } = pose;
     hits.clear();
     hits.resize(fan.len(), (f64::INFINITY, usize::MAX));
     let (hs, hc) = heading.sin_cos();
@@ -374,7 +382,12 @@ mod tests {
             for _ in 0..40 {
                 let o = (rng.random_range(-10.0..10.0), rng.random_range(-10.0..10.0));
                 let heading = rng.random_range(-7.0..7.0);
-                scan(&prims, &fan, (o.0, o.1, heading), 12.0, &mut hits);
+                let pose = ScannerPose {
+                    x: o.0,
+                    y: o.1,
+                    heading_rad: heading,
+                };
+                scan(&prims, &fan, pose, 12.0, &mut hits);
                 for (i, hit) in hits.iter().enumerate() {
                     let a = heading + fan.angle_min + i as f64 * step;
                     match cast(&prims, o.0, o.1, a, 12.0) {

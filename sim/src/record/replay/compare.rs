@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use golf_car_can::spec::NetworkSpec;
 use serde::Serialize;
-use ugv_controller::core::COMMAND_PERIOD;
+use ugv_controller::control::COMMAND_PERIOD;
 
 use super::read::Command;
 use crate::record::RecordMode;

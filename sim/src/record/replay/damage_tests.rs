@@ -46,7 +46,7 @@ fn sil_recording() -> &'static [u8] {
     })
 }
 
-/// The controller's own recording (`ugv-controller run --log`) of a SIL run with a
+/// The controller's own recording (`ugv-controller run --record`) of a SIL run with a
 /// second sender on its heartbeat's ID, made once.
 fn controller_recording() -> &'static [u8] {
     static REC: OnceLock<Vec<u8>> = OnceLock::new();
@@ -338,7 +338,7 @@ fn replay_cut(cut: &[u8]) -> Option<bool> {
     );
     // Every tick before the instant the comparison stops at.
     let until = report.compared_until_s.unwrap();
-    let tick = ugv_controller::core::COMMAND_PERIOD;
+    let tick = ugv_controller::control::COMMAND_PERIOD;
     assert!(
         report.replayed_s < until && report.replayed_s >= until - tick - 1e-9,
         "{report:?}"

@@ -12,7 +12,7 @@ use foxglove::Decode;
 use foxglove::schemas::LaserScan;
 use golf_car_can::spec::NetworkSpec;
 use ugv_controller::config::ControllerConfig;
-use ugv_controller::core::COMMAND_PERIOD;
+use ugv_controller::control::COMMAND_PERIOD;
 
 use super::scan::{self, RawMessage, ScanError, Scanned};
 use crate::record::{CONFIG_ATTACHMENT, RUN_METADATA, RunInfo, direction, topics};
@@ -86,7 +86,7 @@ pub enum ReplayError {
         message: String,
     },
     #[error("the controller: {0}")]
-    Controller(#[from] ugv_controller::core::ControllerError),
+    Controller(#[from] ugv_controller::control::ControllerError),
     #[error("golf_car.dbc: {0}")]
     Dbc(#[from] golf_car_can::spec::SpecError),
     #[error("the controller's CAN port: {0}")]

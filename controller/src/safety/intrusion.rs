@@ -214,7 +214,7 @@ impl ActuationWatch {
                     self.steering.push(now, c.enable, t, STEER_WINDOW);
                 }
                 GolfCarMessage::ThrottleCmd(c) => {
-                    let speed = crate::monitor::commanded_speed(c);
+                    let speed = super::monitor::commanded_speed(c);
                     self.throttle.push(now, c.enable, speed, SPEED_WINDOW);
                 }
                 _ => {}

@@ -19,7 +19,7 @@
 //!
 //! The topics every recording has are the controller library's
 //! ([`ugv_controller::record::Writer`], which the controller's own recording,
-//! `ugv-controller run --log`, uses too); this adds the world's (the fix, the car,
+//! `ugv-controller run --record`, uses too); this adds the world's (the fix, the car,
 //! the obstacles).
 //!
 //! One recorder for both modes: the runner hands it what the sensors produced
@@ -52,7 +52,7 @@ use crate::run::{SensorOutput, Sim};
 use crate::scenario::{Obstacle, Scenario};
 use crate::vehicle::VehicleState;
 use tap::{BusTap, TapFrame};
-use ugv_controller::core::Controller;
+use ugv_controller::control::Controller;
 use ugv_controller::record::Writer;
 pub use ugv_controller::record::{
     BUS_LOG, CHUNK_SIZE, CONFIG_ATTACHMENT, FLUSH_PERIOD, MCAP_FILE, NMEA_FILE, RUN_METADATA,
@@ -60,7 +60,7 @@ pub use ugv_controller::record::{
 };
 
 /// The directory under a HIL run's results where the controller `ugv-sim run
-/// --controller-log` starts records its own ports (`ugv-controller run --log`).
+/// --controller-log` starts records its own ports (`ugv-controller run --record`).
 pub const CONTROLLER_LOG_DIR: &str = "controller";
 
 /// Seconds between two vehicle poses (the physics may run faster).

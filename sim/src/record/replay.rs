@@ -10,7 +10,7 @@
 //! other instants than the replay's: it is compared with [`Tolerance::HIL`], which
 //! pairs each replayed command with the recorded one of the same message nearest in
 //! time and compares signal values within bounds (README, "Replay"). The controller's
-//! own recording (`ugv-controller run --log`: on the car, on the bench, beside a HIL
+//! own recording (`ugv-controller run --record`: on the car, on the bench, beside a HIL
 //! run) holds every input at the tick that took it, the ticks its loop skipped and
 //! the ticks it took each replanning at and the one it was asked to stop at: it
 //! replays byte for byte too.
@@ -37,7 +37,7 @@ use firmware_bridge::can::membus::{MemBus, MemEndpoint, MemFrame};
 use firmware_bridge::nmea::ReaderConfig;
 use golf_car_can::spec::NetworkSpec;
 use serde::Serialize;
-use ugv_controller::core::{COMMAND_PERIOD, Controller};
+use ugv_controller::control::{COMMAND_PERIOD, Controller};
 use ugv_controller::runtime::{MemGps, MemLaser, Runtime};
 use ugv_controller::trace::TraceWriter;
 

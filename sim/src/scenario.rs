@@ -26,7 +26,7 @@ pub use fields::ScenarioError;
 pub use schema::*;
 
 /// The paper's scenario, shipped embedded as the default.
-pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
+pub const PAPER_SCENARIO: &str = include_str!("../scenarios/paper.toml");
 
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

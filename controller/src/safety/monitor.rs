@@ -3,7 +3,7 @@
 //! (stuck, or a broken linkage), a drive that no longer slows when told to (a stuck
 //! throttle), and a driver's hands on the wheel (the report's override bit) each
 //! become a finding, which the safety check turns into an estop with FAULT_REPORT
-//! actuator_fault. The intrusion watch (`intrusion.rs`) covers the opposite case:
+//! actuator_fault. The intrusion watch ([`super::intrusion`]) covers the opposite case:
 //! actuation nobody commanded.
 
 use std::collections::VecDeque;
@@ -43,6 +43,14 @@ const CONFIRM_REPORTS: u32 = 3;
 /// configuration allows (`vehicle.steer_dead_time_s`), over which the controller reads
 /// back the steering commands still on their way ([`ActuatorMonitor::steer_command_as_of`]).
 const HISTORY_S: f64 = 5.5;
+
+/// A steering command as sent: whether it enabled the ECU, and its target.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SteerCommand {
+    pub enable: bool,
+    /// The target road-wheel angle, degrees.
+    pub angle_deg: f64,
+}
 
 /// What the monitor found.
 #[derive(Clone, Debug, PartialEq)]
@@ -269,9 +277,10 @@ impl ActuatorMonitor {
     }
 
     /// The steering command in force `age` seconds before `now` (the newest sent at
-    /// least that long ago): whether it enabled the ECU, and its angle in degrees.
-    pub fn steer_command_as_of(&self, now: f64, age: f64) -> Option<(bool, f64)> {
+    /// least that long ago).
+    pub fn steer_command_as_of(&self, now: f64, age: f64) -> Option<SteerCommand> {
         as_of(&self.steer_cmds, now, age)
+            .map(|(enable, angle_deg)| SteerCommand { enable, angle_deg })
     }
 
     /// The first finding, kept.

@@ -1944,7 +1944,7 @@ mod tests {
         nav
     }
 
-    /// Replan at `now` from `pose` when due, recover, follow: as the core's tick does.
+    /// Replan at `now` from `pose` when due, recover, follow: as the controller's tick does.
     fn tick(nav: &mut Navigator, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
         if nav.replan_due(now, pose) {
             nav.issued(now);

@@ -1,11 +1,13 @@
-//! The controller's core, free of I/O: frames, fixes and scans go in, CAN messages
-//! come out of [`Controller::tick`], called every 10 ms. The binary wires it to the
-//! real endpoints (HIL); the simulator runs it in lockstep (SIL) through the same
-//! codecs.
+//! The controller, free of I/O: frames, fixes and scans go in, CAN messages come out
+//! of [`Controller::tick`], called every 10 ms, which runs the mode machine (waiting
+//! for the sensors, enabling the ECUs, driving, arrived, estop), asks guidance for the
+//! steering and speed, and stops the car on what [`crate::safety`] finds. The loop
+//! ([`crate::runtime`]) wires it to the real endpoints (the binary) or to memory ports
+//! in lockstep (SIL, replay) through the same codecs.
 
 use firmware_bridge::Received;
 use firmware_bridge::clock::next_slot;
-use firmware_bridge::nmea::{FixQuality, GpsReading};
+use firmware_bridge::nmea::GpsReading;
 use golf_car_can::{
     ControllerHeartbeat, ControllerHeartbeatState, FaultReport, FaultReportCode, FaultReportSource,
     GolfCarMessage, SteeringCmd, SteeringReport, SteeringReportFault, ThrottleCmd, ThrottleCmdGear,
@@ -17,16 +19,15 @@ use crate::config::ControllerConfig;
 use crate::guidance::{
     Circle, FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
 };
-use crate::intrusion::ActuationWatch;
 use crate::localisation::{Localiser, Pose, propagate};
 use crate::perception::{Perception, PerceptionError, Pose2, Scan};
+use crate::safety::intrusion::ActuationWatch;
+use crate::safety::monitor::{ActuatorMonitor, SteerCommand};
+use crate::safety::{Fault, Inputs, shows_the_laser_sees};
 
 /// Command period (STEERING_CMD, THROTTLE_CMD), seconds.
 pub const COMMAND_PERIOD: f64 = 0.01;
 
-/// A scan with fewer usable beams (returns or free space) than this fraction is
-/// blindness, not a scan: the laser-silence watchdog is not refreshed by it.
-pub const MIN_USABLE_BEAMS: f64 = 0.5;
 /// Heartbeat period, seconds.
 pub const HEARTBEAT_PERIOD: f64 = 0.02;
 /// FAULT_REPORT repetition while a fault lasts, seconds.
@@ -49,7 +50,7 @@ const BRAKE_MARGIN: f64 = 1.25;
 /// otherwise what stops it [`STOP_MARGIN_M`] short with the brake's calibrated
 /// deceleration (`vehicle.brake_decel`), [`BRAKE_MARGIN`] times over. A drive that
 /// does not slow (a stuck throttle) so meets a commanded brake, which the actuator
-/// monitor expects to see work (`monitor.rs`).
+/// monitor expects to see work (`safety/monitor.rs`).
 fn stop_brake(v: f64, room: f64, cfg: &ControllerConfig) -> f64 {
     let needed = v * v / (2.0 * (room - STOP_MARGIN_M).max(0.05));
     if needed <= cfg.follower.decel {
@@ -206,7 +207,7 @@ pub struct Controller {
     /// Since when every input has been fresh without a break, while waiting for them.
     ready_since: Option<f64>,
     /// The ECUs' reports against the commands (a stuck actuator, a driver's hands).
-    monitor: crate::monitor::ActuatorMonitor,
+    monitor: ActuatorMonitor,
     obstacles: Vec<Circle>,
     stop_reason: Option<String>,
     next_heartbeat: f64,
@@ -248,7 +249,7 @@ impl Controller {
             ecu_fault: None,
             last_scan: None,
             ready_since: None,
-            monitor: crate::monitor::ActuatorMonitor::new(&cfg.vehicle),
+            monitor: ActuatorMonitor::new(&cfg.vehicle),
             obstacles: Vec::new(),
             stop_reason: None,
             next_heartbeat: 0.0,
@@ -364,7 +365,10 @@ impl Controller {
             // The command acting in step j was sent at least this long before now.
             let age = v.steer_dead_time_s - f64::from(j) * COMMAND_PERIOD - 1e-9;
             match self.monitor.steer_command_as_of(now, age) {
-                Some((true, deg)) => Some(deg.to_radians() + bias),
+                Some(SteerCommand {
+                    enable: true,
+                    angle_deg,
+                }) => Some(angle_deg.to_radians() + bias),
                 _ => None,
             }
         });
@@ -477,10 +481,7 @@ impl Controller {
         }
         // A scan whose beams are mostly dropouts (a NaN or zero-range storm) shows
         // nothing: it does not refresh the watchdog either.
-        let usable = (0..scan.ranges.len())
-            .filter(|&i| scan.beam(i) != crate::perception::Beam::Dropout)
-            .count();
-        if (usable as f64) < MIN_USABLE_BEAMS * scan.ranges.len() as f64 {
+        if !shows_the_laser_sees(scan) {
             self.bad_scans += 1;
             return;
         }
@@ -527,71 +528,23 @@ impl Controller {
         }
     }
 
-    fn fix_ok(&self, now: f64) -> Result<(), (FaultReportCode, String)> {
-        let s = &self.cfg.safety;
-        if let Some(jump) = &self.loc.jump {
-            return Err((
-                FaultReportCode::GpsDegraded,
-                format!(
-                    "the GPS position jumped {:.2} m from the dead-reckoned one at {:.2} s",
-                    jump.metres, jump.at
-                ),
-            ));
-        }
-        match self.loc.last_fix {
-            None => Err((FaultReportCode::GpsLost, "no GPS fix".to_owned())),
-            Some((t, _)) if now - t > s.gps_timeout() => Err((
-                FaultReportCode::GpsLost,
-                format!("no GPS fix for {:.2} s", now - t),
-            )),
-            Some((_, q)) => {
-                let good =
-                    q == FixQuality::RtkFixed || (s.accept_rtk_float && q == FixQuality::RtkFloat);
-                if good {
-                    Ok(())
-                } else {
-                    Err((
-                        FaultReportCode::GpsDegraded,
-                        format!("GPS fix quality {q:?} is below RTK"),
-                    ))
-                }
-            }
-        }
+    /// Every reason to stop now ([`crate::safety::check`]).
+    fn safety_check(&self, now: f64) -> Result<(), Fault> {
+        crate::safety::check(
+            &self.cfg.safety,
+            now,
+            &Inputs {
+                localiser: &self.loc,
+                last_scan: self.last_scan,
+                steering_report: self.steering.map(|s| s.0),
+                throttle_report: self.throttle.map(|s| s.0),
+                ecu_fault: self.ecu_fault.as_deref(),
+                monitor: &self.monitor,
+            },
+        )
     }
 
-    /// Every reason to stop now (sensors, reports, ECU faults).
-    fn safety_check(&self, now: f64) -> Result<(), (FaultReportCode, String)> {
-        self.fix_ok(now)?;
-        let s = &self.cfg.safety;
-        match self.last_scan {
-            Some(t) if now - t <= s.laser_timeout_s => {}
-            Some(t) => {
-                return Err((
-                    FaultReportCode::LaserSilent,
-                    format!("no laser scan for {:.2} s", now - t),
-                ));
-            }
-            None => return Err((FaultReportCode::LaserSilent, "no laser scan".to_owned())),
-        }
-        for (name, last) in [
-            ("STEERING_REPORT", self.steering.map(|s| s.0)),
-            ("THROTTLE_REPORT", self.throttle.map(|s| s.0)),
-        ] {
-            match last {
-                Some(t) if now - t <= s.report_timeout_s => {}
-                _ => return Err((FaultReportCode::ReportTimeout, format!("{name} silent"))),
-            }
-        }
-        if let Some(f) = &self.ecu_fault {
-            return Err((FaultReportCode::ActuatorFault, f.clone()));
-        }
-        if let Some(f) = self.monitor.finding() {
-            return Err((FaultReportCode::ActuatorFault, f.reason.clone()));
-        }
-        Ok(())
-    }
-
-    /// A fault found outside the core (a port lost, a process stopping): estop now,
+    /// A fault found outside the controller (a port lost, a process stopping): estop now,
     /// with `code` in FAULT_REPORT and `reason` in the mode.
     pub fn fail(&mut self, code: FaultReportCode, reason: String) {
         if !matches!(self.mode, Mode::Estop { .. }) {
@@ -757,7 +710,7 @@ impl Controller {
                 _ => self.ready_since = None,
             },
             Mode::Enabling { since } => {
-                if let Err((code, reason)) = self.safety_check(now) {
+                if let Err(Fault { code, reason }) = self.safety_check(now) {
                     self.estop(code, reason);
                 } else if self.steering.is_some_and(|s| s.1.enabled)
                     && self.throttle.is_some_and(|t| t.1.enabled)
@@ -771,7 +724,7 @@ impl Controller {
                 }
             }
             Mode::Auto | Mode::Arrived { stopped: false } => {
-                if let Err((code, reason)) = self.safety_check(now) {
+                if let Err(Fault { code, reason }) = self.safety_check(now) {
                     self.estop(code, reason);
                 }
             }

@@ -49,7 +49,7 @@ use rand_distr::StandardNormal;
 use super::FieldError;
 use crate::scenario::schema::Obstacle;
 use crate::world::World;
-use crate::world::ray::{Fan, Hit};
+use crate::world::ray::{Fan, Hit, ScannerPose};
 
 mod config;
 mod noise;
@@ -159,14 +159,14 @@ impl LaserDevice {
 
     /// The scanner's position and forward direction in the world for a vehicle pose
     /// (rear axle `x`, `y`, heading `theta`, radians).
-    pub fn scanner_pose(&self, x: f64, y: f64, theta: f64) -> (f64, f64, f64) {
+    pub fn scanner_pose(&self, x: f64, y: f64, theta: f64) -> ScannerPose {
         let (s, c) = theta.sin_cos();
         let (mx, my) = (self.config.mount_x, self.config.mount_y);
-        (
-            x + mx * c - my * s,
-            y + mx * s + my * c,
-            theta + self.config.mount_yaw_deg.to_radians(),
-        )
+        ScannerPose {
+            x: x + mx * c - my * s,
+            y: y + mx * s + my * c,
+            heading_rad: theta + self.config.mount_yaw_deg.to_radians(),
+        }
     }
 
     /// One scan at simulated time `t` (the world must already be at `t`: see
