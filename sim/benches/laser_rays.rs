@@ -18,7 +18,6 @@ const RUN: Duration = Duration::from_secs(2);
 fn crowded() -> Scenario {
     let mut rng = ChaCha8Rng::seed_from_u64(200);
     let mut s = Scenario::default();
-    s.obstacles.clear();
     while s.obstacles.len() < 200 {
         let (x, y): (f64, f64) = (rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0));
         if x.hypot(y) < 6.0 {
@@ -98,8 +97,8 @@ fn bench(name: &str, s: &Scenario, x: f64, y: f64, theta: f64) {
     );
 }
 
-fn main() {
-    let paper = Scenario::default();
+fn main() -> Result<(), ugv_sim::ScenarioError> {
+    let paper = Scenario::paper()?;
     let start = &paper.start;
     bench(
         "paper (start pose)",
@@ -124,4 +123,5 @@ fn main() {
     }
     let crowded = crowded();
     bench("200 obstacles", &crowded, 0.0, 0.0, 0.0);
+    Ok(())
 }

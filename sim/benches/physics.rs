@@ -27,7 +27,7 @@ fn steps_per_second(scenario: Scenario, steps: u64) -> anyhow::Result<f64> {
 }
 
 fn main() -> anyhow::Result<()> {
-    let mut paper = Scenario::default();
+    let mut paper = Scenario::paper()?;
     paper.sim.time_limit_s = 1e9;
     paper.success.reach_goal = false;
     let mut crowded = paper.clone();

@@ -1,9 +1,11 @@
 //! Scenarios: the world, the vehicle, its devices and the verdict's criteria, as TOML.
 //!
-//! Every struct has a `Default` that is the seed paper's simulation (start (0,0)
-//! heading 45 degrees, goal (30,15), one post of radius 3 m at (19,8)), so a scenario
-//! file only states what differs. A malformed or inconsistent file is refused with an
-//! error naming the file, the line and the field.
+//! Every section has a `Default` that is the seed paper's (start (0,0) heading 45
+//! degrees, goal (30,15), its golf car, scanner and receiver), so a scenario file only
+//! states what differs; its obstacles default to none, so a file lists every obstacle
+//! it has. The paper's scenario, its post of radius 3 m at (19,8) included, is
+//! [`Scenario::paper`] (`sim/scenarios/paper.toml`). A malformed or inconsistent file
+//! is refused with an error naming the file, the line and the field.
 
 use std::path::{Path, PathBuf};
 
@@ -25,7 +27,7 @@ pub mod schema;
 pub use fields::ScenarioError;
 pub use schema::*;
 
-/// The paper's scenario, shipped embedded as the default.
+/// The paper's scenario, shipped embedded: what `ugv-sim run` runs without a file.
 pub const PAPER_SCENARIO: &str = include_str!("../scenarios/paper.toml");
 
 /// A whole scenario.
@@ -64,8 +66,8 @@ pub struct Scenario {
 impl Default for Scenario {
     fn default() -> Self {
         Scenario {
-            name: "paper".to_owned(),
-            description: "The seed paper's simulation: one post between start and goal".to_owned(),
+            name: "unnamed".to_owned(),
+            description: String::new(),
             datum: Datum::default(),
             start: Pose {
                 x: 0.0,
@@ -74,12 +76,7 @@ impl Default for Scenario {
             },
             goal: Goal::default(),
             waypoints: Vec::new(),
-            obstacles: vec![Obstacle::Circle {
-                x: 19.0,
-                y: 8.0,
-                radius: 3.0,
-                motion: None,
-            }],
+            obstacles: Vec::new(),
             vehicle: VehicleConfig::default(),
             steering: SteeringConfig::default(),
             throttle: ThrottleConfig::default(),
@@ -166,7 +163,8 @@ impl Scenario {
         Scenario::from_toml(&text, &path.display().to_string())
     }
 
-    /// The paper's scenario (embedded).
+    /// The paper's scenario (embedded): the defaults with its post of radius 3 m at
+    /// (19, 8), the one place the post is defined.
     pub fn paper() -> Result<Scenario, ScenarioError> {
         Scenario::from_toml(PAPER_SCENARIO, "scenarios/paper.toml (embedded)")
     }

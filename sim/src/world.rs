@@ -308,7 +308,7 @@ mod tests {
 
     #[test]
     fn paper_scenario_footprint_collides_only_inside_the_post() {
-        let s = Scenario::default();
+        let s = Scenario::paper().expect("the paper's scenario");
         let w = World::new(&s.obstacles);
         let at = |x, y| {
             VehicleState::at(&ScenarioPose {
@@ -328,7 +328,7 @@ mod tests {
 
     #[test]
     fn rays_hit_posts_and_walls_where_geometry_says() {
-        let mut s = Scenario::default();
+        let mut s = Scenario::paper().expect("the paper's scenario");
         s.obstacles.push(Obstacle::Wall {
             points: vec![[-5.0, 10.0], [5.0, 10.0], [5.0, 20.0]],
             thickness: 0.4,

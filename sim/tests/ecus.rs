@@ -23,7 +23,6 @@ struct Bench {
 
 fn empty_world() -> Scenario {
     let mut s = Scenario::default();
-    s.obstacles.clear();
     s.sim.time_limit_s = 1000.0;
     s.success.reach_goal = false;
     s

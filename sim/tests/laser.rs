@@ -93,7 +93,7 @@ fn ranges_match_ray_circle_intersections_with_noise_off() {
             mount_yaw_deg: 10.0,
             ..LaserConfig::default()
         }),
-        ..Scenario::default()
+        ..Scenario::paper().expect("the paper's scenario")
     };
     let world = World::new(&s.obstacles);
     let mut dev = device!(&s);

@@ -11,8 +11,8 @@ use ugv_sim::ScenarioError;
 use ugv_sim::mission::checked_controller_config;
 use ugv_sim::scenario::Scenario;
 
-/// Every floating-point field of the default scenario written out, as a path of keys
-/// and array indices.
+/// Every floating-point field of the paper's scenario (the defaults and a post)
+/// written out, as a path of keys and array indices.
 fn float_fields(value: &toml::Value, path: &mut Vec<String>, out: &mut Vec<Vec<String>>) {
     match value {
         toml::Value::Float(_) => out.push(path.clone()),
@@ -53,14 +53,14 @@ fn set(value: &mut toml::Value, path: &[String], to: f64) {
     set(next, rest, to);
 }
 
-fn default_table() -> toml::Value {
-    let text = toml::to_string(&Scenario::default()).expect("the default encodes");
-    toml::from_str(&text).expect("the default decodes")
+fn paper_table() -> toml::Value {
+    let text = toml::to_string(&Scenario::paper().expect("the paper's scenario")).expect("encodes");
+    toml::from_str(&text).expect("decodes")
 }
 
 #[test]
 fn every_float_field_refuses_nan_infinities_and_values_beyond_f32() {
-    let base = default_table();
+    let base = paper_table();
     let mut fields = Vec::new();
     float_fields(&base, &mut Vec::new(), &mut fields);
     assert!(fields.len() > 60, "found only {} fields", fields.len());
@@ -271,4 +271,29 @@ fn the_shipped_scenarios_still_load() {
         }
         assert!(n > 0, "no scenarios in {}", dir.display());
     }
+}
+
+#[test]
+fn obstacles_default_to_none_and_the_paper_states_its_post() {
+    let bare = Scenario::from_toml("name = \"bare\"\n", "bare.toml").expect("loads");
+    assert!(bare.obstacles.is_empty(), "{:?}", bare.obstacles);
+    assert_eq!(Scenario::default().obstacles, Vec::new());
+    // The paper's scenario is the defaults with its post: the one place it is defined.
+    let paper = Scenario::paper().expect("the paper's scenario");
+    assert_eq!(
+        paper.obstacles,
+        vec![ugv_sim::scenario::Obstacle::Circle {
+            x: 19.0,
+            y: 8.0,
+            radius: 3.0,
+            motion: None,
+        }]
+    );
+    let defaults = Scenario {
+        name: paper.name.clone(),
+        description: paper.description.clone(),
+        obstacles: paper.obstacles.clone(),
+        ..Scenario::default()
+    };
+    assert_eq!(paper, defaults);
 }

@@ -18,7 +18,10 @@ fn small_suite(dir: &Path) -> Result<PathBuf> {
     let short = "[sim]\ntime_limit_s = 1.5\nphysics_hz = 50.0\n";
     std::fs::write(
         suite.join("a.toml"),
-        format!("name = \"short-paper\"\n\n{short}"),
+        format!(
+            "{}\n{short}",
+            ugv_sim::scenario::PAPER_SCENARIO.replace("name = \"paper\"", "name = \"short-paper\"")
+        ),
     )?;
     std::fs::write(
         suite.join("b.toml"),

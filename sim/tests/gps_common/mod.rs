@@ -13,10 +13,10 @@ pub const TICK_S: f64 = 0.005;
 /// The default scenario (datum at Petersburg VA, epoch 2026-05-04T14:00:00Z, seed 1)
 /// with `gps` as its receiver.
 pub fn scenario(gps: GpsConfig) -> Scenario {
-    let mut s = Scenario::default();
-    s.obstacles.clear();
-    s.gps = gps;
-    s
+    Scenario {
+        gps,
+        ..Scenario::default()
+    }
 }
 
 pub fn device(gps: GpsConfig) -> Result<GpsDevice> {
