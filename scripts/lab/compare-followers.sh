@@ -35,8 +35,8 @@ done
 # 3. The conditions: copies of the suite with the disturbance written into each file.
 python3 scripts/lab/comparison-report.py conditions sim/scenarios/suite "$out/scenarios"
 
-# 4. Both followers across the suite in every condition (exit code 1 means a failed
-#    scenario: reported, not fatal).
+# 4. Both followers across the suite in every condition (exit codes 1 and 5 mean a
+#    failed scenario: reported, not fatal).
 for cond in $(ls "$out/scenarios"); do
     "$bin/ugv-sim" suite "$out/scenarios/$cond" --seeds "$seeds" --results "$out/$cond/optimal" >/dev/null 2>&1 || true
     "$bin/ugv-sim" suite "$out/scenarios/$cond" --seeds "$seeds" --results "$out/$cond/anfis" \

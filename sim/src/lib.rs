@@ -11,6 +11,7 @@ pub use firmware_bridge::clock;
 pub mod busload;
 pub mod devices;
 pub mod ecu;
+pub mod exit;
 pub mod faults;
 pub mod measure;
 pub mod mission;

@@ -10,9 +10,10 @@
 //! ugv-sim way-through WORLD...                                       is there a way through at all
 //! ```
 //!
-//! Exit codes of `run` ([`RUN_EXIT_CODES`], shown by `run --help`): 0 passed, 1 failed
-//! its criteria, 2 usage error, 3 stopped (Ctrl-C, the controller exited), 4 setup or
-//! run error, 5 time limit.
+//! Exit codes of `run`, `suite` and `merge` ([`ugv_sim::exit`], shown by their
+//! `--help`): 0 passed, 1 failed its criteria, 2 usage error, 3 stopped (Ctrl-C, the
+//! controller exited), 4 setup or run error, 5 time limit; a suite's is its most
+//! severe item's.
 
 use std::io::IsTerminal;
 use std::net::SocketAddr;
@@ -33,6 +34,7 @@ use ugv_controller::trace::TraceWriter;
 use ugv_sim::devices::map::DeviceMap;
 use ugv_sim::ecu::EcuKind;
 use ugv_sim::ecu::station::run_standalone;
+use ugv_sim::exit::{self, Exit};
 use ugv_sim::hil::{self, Endpoints, HilOptions};
 use ugv_sim::mission::{checked_controller_config, controller_config};
 use ugv_sim::record::live::{self, LiveView};
@@ -41,7 +43,7 @@ use ugv_sim::scenario::Overrides;
 use ugv_sim::sil::Hook;
 use ugv_sim::sweep::{Plan, PlanInfo, Shard};
 use ugv_sim::verdict::{RunEnd, judge_and_write};
-use ugv_sim::{Mode, Outcome, Scenario};
+use ugv_sim::{Mode, Scenario};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -58,15 +60,18 @@ struct Cli {
 enum Command {
     /// Run a scenario: in real time on the real wires (HIL; the default), or with the
     /// controller library in lockstep (--sil).
-    #[command(after_help = RUN_EXIT_CODES)]
+    #[command(after_help = exit::RUN_HELP)]
     Run(RunArgs),
     /// Run every scenario of a folder in SIL, in parallel (with --seeds and --vary: a
     /// sweep; with --shard: a part of it), and write summary.md, summary.json,
-    /// junit.xml and items.json. Exit code 0 when all pass, 1 otherwise.
+    /// junit.xml and items.json. Exit codes below: one per way an item ends, the most
+    /// severe item's.
+    #[command(after_help = exit::SUITE_HELP)]
     Suite(SuiteArgs),
     /// Join the shards of one suite or sweep (each folder's items.json) into one
-    /// summary.md, summary.json and junit.xml; refuses missing or doubled items. Exit
-    /// code 0 when all passed, 1 otherwise.
+    /// summary.md, summary.json and junit.xml; refuses missing or doubled items (exit
+    /// code 4). Exit codes as `suite`'s, of the merged items.
+    #[command(after_help = exit::SUITE_HELP)]
     Merge {
         /// Shard result folders (or their items.json files).
         #[arg(required = true)]
@@ -315,7 +320,7 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("ugv-sim: {e:#}");
-            ExitCode::from(4)
+            ExitCode::from(Exit::Setup.code())
         }
     }
 }
@@ -567,26 +572,6 @@ fn replay(path: &std::path::Path, trace: Option<&std::path::Path>) -> Result<Exi
     })
 }
 
-/// `ugv-sim run`'s exit codes, for `run --help` (docs/simulator.md says the same).
-const RUN_EXIT_CODES: &str = "Exit codes:
-  0  passed: the verdict's criteria are met (the goal reached, or a safe stop where the scenario asks for one)
-  1  failed its criteria: a collision, or the goal reached with a criterion missed (clearance, route, safe state)
-  2  usage error: the command line
-  3  stopped: Ctrl-C, or the controller exited
-  4  setup or run error: a bad scenario, a wire that cannot be opened, no controller within 60 s
-  5  time limit: the run reached sim.time_limit_s without passing";
-
-/// The exit code of a run that ended with `outcome` and a verdict that `passed` or not
-/// ([`RUN_EXIT_CODES`]; 2 and 4 come from clap and from `main`).
-fn exit_code(outcome: &Outcome, passed: bool) -> u8 {
-    match outcome {
-        Outcome::Stopped { .. } => 3,
-        _ if passed => 0,
-        Outcome::TimeLimit { .. } => 5,
-        Outcome::GoalReached { .. } | Outcome::Collision { .. } => 1,
-    }
-}
-
 /// `ugv-sim run`: the scenario with the command line's changes, in SIL or in HIL.
 fn run_scenario(args: RunArgs) -> Result<ExitCode> {
     let (sc, cfg) = scenario_to_run(&args)?;
@@ -702,7 +687,9 @@ fn run_sil(
         verdict.time() / wall.max(1e-9)
     );
     println!("{}", serde_json::to_string_pretty(&verdict)?);
-    Ok(ExitCode::from(exit_code(&run.outcome, verdict.passed)))
+    Ok(ExitCode::from(
+        Exit::of_run(&run.outcome, verdict.passed).code(),
+    ))
 }
 
 /// `ugv-sim run` in HIL: the scenario in real time on the wires, with status lines as
@@ -735,7 +722,9 @@ fn run_hil(
         eprintln!();
     }
     println!("{}", serde_json::to_string_pretty(&verdict)?);
-    Ok(ExitCode::from(exit_code(&outcome, verdict.passed)))
+    Ok(ExitCode::from(
+        Exit::of_run(&outcome, verdict.passed).code(),
+    ))
 }
 
 /// The HIL options of `ugv-sim run`'s command line; the run id is the scenario's name
@@ -989,7 +978,7 @@ fn run_with_progress(
 }
 
 /// The suite's summaries written into `results` and its pace said (`wall` seconds for
-/// the `entries`): exit code 0 when every item passed, 1 otherwise.
+/// the `entries`): the exit code of the most severe item ([`Exit::of_suite`]).
 fn finish_suite(
     results: &std::path::Path,
     info: PlanInfo,
@@ -1011,11 +1000,7 @@ fn finish_suite(
         entries.len() as f64 / wall.max(1e-9),
         results.display()
     );
-    Ok(if summary.passed() {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(1)
-    })
+    Ok(ExitCode::from(Exit::of_suite(&summary).code()))
 }
 
 /// summary.md (also printed), summary.json, junit.xml and items.json in `dir`.
@@ -1051,9 +1036,5 @@ fn merge_shards(shards: &[PathBuf], out: &std::path::Path) -> Result<ExitCode> {
         merged.items.len(),
         out.display()
     );
-    Ok(if summary.passed() {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(1)
-    })
+    Ok(ExitCode::from(Exit::of_suite(&summary).code()))
 }

@@ -365,11 +365,6 @@ impl Summary {
         Summary { groups, items }
     }
 
-    /// Whether every item passed.
-    pub fn passed(&self) -> bool {
-        self.items.iter().all(|r| r.passed)
-    }
-
     /// A sweep: some scenario ran more than once, or at a grid point.
     fn sweep(&self) -> bool {
         self.items
