@@ -28,7 +28,7 @@ use ugv_controller::trace::Trace;
 
 pub use lockstep::{ACK_TIMEOUT, FIRST_ACK_TIMEOUT, Lockstep, run_lockstep};
 pub use process::{ControllerProcess, ensure_no_controller, spawn_controller, wait_for_controller};
-pub use wires::{WireMap, Wires, gateway_log};
+pub use wires::{RunEnded, RunState, WireMap, Wires, gateway_log};
 
 use crate::devices::gps::GpsError;
 use crate::devices::map::{ControllerSite, GpsOutput};
@@ -442,69 +442,81 @@ pub fn run_scenario(
     let mut sim = Sim::new(sc.clone(), steering, throttle).with_sensors()?;
     let mut recording = open_recording(tap, sc, config, options)?;
     log_wires(&wires.map, &iface, log);
-    let (config_path, trace_path) = write_run_files(options, &wires.map, config)?;
-    let mut controller =
-        start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
-    // In lockstep the simulator waits for the controller's answer to its start instead.
-    if controller.is_none()
-        && !options.lockstep
-        && !await_controller(sc, options, &iface, &config_path, stop, log)?
-    {
-        return Ok(stopped_before_start(sc, &sim));
+    // From the first wires.json on, the file says where the run is, and how it ended
+    // before the wires close (when `wires` drops), whatever ended it.
+    let result = (|| {
+        let (config_path, trace_path) = write_run_files(options, &wires.map, config)?;
+        let mut controller =
+            start_controller(options, &iface, &config_path, &wires.map, &trace_path, log)?;
+        // In lockstep the simulator waits for the controller's answer to its start instead.
+        if controller.is_none()
+            && !options.lockstep
+            && !await_controller(sc, options, &iface, &config_path, stop, log)?
+        {
+            return Ok(stopped_before_start(sc, &sim));
+        }
+        log(&format!(
+            "physics {} Hz, time limit {} s",
+            sc.sim.physics_hz, sc.sim.time_limit_s
+        ));
+        wires.map.state = RunState::Running;
+        write_wires(options, &wires.map)?;
+        // The controller and every helper thread were started: they stay ordinary.
+        let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
+        log(&rt_sched.promotion.describe("tick loop"));
+        let run = run_hil(
+            &mut sim,
+            &mut wires,
+            controller.as_mut(),
+            stop,
+            options.status_every,
+            status,
+            recording.as_mut(),
+        );
+        drop(rt_sched);
+        if let Some(summary) = recording.and_then(Recording::finish) {
+            log(&crate::record::describe(&summary));
+        }
+        // Whatever happened, the controller is asked to finish and its trace collected.
+        let mut trace = controller.as_mut().and_then(|c| finish_controller(c, log));
+        if let (true, Some(t)) = (options.lockstep, &mut trace) {
+            // The controller's loop ended with the simulator's run: its length is the
+            // simulator's, as in SIL (the controller's last tick may be a step before).
+            t.duration = sim.time();
+        }
+        let (outcome, started_ns) = run?;
+        if let Some(p) = &pacer {
+            sim.bus_arbitrated(p.stats());
+        }
+        log_gps_input(&wires, log);
+        let measured = |verdict: &mut crate::verdict::Verdict| {
+            verdict.fix_latency = trace
+                .as_ref()
+                .and_then(|t| fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns));
+            verdict.wires = Some(wires.stats());
+        };
+        let report = sim.report(outcome.clone());
+        let end = RunEnd {
+            mode: Mode::Hil,
+            report,
+            driven: &sim.trajectory,
+            trace: trace.as_ref(),
+        };
+        let verdict = judge_and_write(
+            sc,
+            end,
+            config.perception.detection_radius,
+            &options.results,
+            measured,
+        )?;
+        Ok((verdict, outcome))
+    })();
+    wires.map.state = RunState::Ended;
+    wires.map.end = Some(RunEnded::of(&result));
+    if let Err(e) = write_wires(options, &wires.map) {
+        log(&format!("{e} (the end of the run)"));
     }
-    log(&format!(
-        "physics {} Hz, time limit {} s",
-        sc.sim.physics_hz, sc.sim.time_limit_s
-    ));
-    // The controller and every helper thread were started: they stay ordinary.
-    let rt_sched = firmware_bridge::realtime::promote(options.rt_priority);
-    log(&rt_sched.promotion.describe("tick loop"));
-    let run = run_hil(
-        &mut sim,
-        &mut wires,
-        controller.as_mut(),
-        stop,
-        options.status_every,
-        status,
-        recording.as_mut(),
-    );
-    drop(rt_sched);
-    if let Some(summary) = recording.and_then(Recording::finish) {
-        log(&crate::record::describe(&summary));
-    }
-    // Whatever happened, the controller is asked to finish and its trace collected.
-    let mut trace = controller.as_mut().and_then(|c| finish_controller(c, log));
-    if let (true, Some(t)) = (options.lockstep, &mut trace) {
-        // The controller's loop ended with the simulator's run: its length is the
-        // simulator's, as in SIL (the controller's last tick may be a step before).
-        t.duration = sim.time();
-    }
-    let (outcome, started_ns) = run?;
-    if let Some(p) = &pacer {
-        sim.bus_arbitrated(p.stats());
-    }
-    log_gps_input(&wires, log);
-    let measured = |verdict: &mut crate::verdict::Verdict| {
-        verdict.fix_latency = trace
-            .as_ref()
-            .and_then(|t| fix_latency(&t.fix_timing, sc.sim.epoch.unix_s(), started_ns));
-        verdict.wires = Some(wires.stats());
-    };
-    let report = sim.report(outcome.clone());
-    let end = RunEnd {
-        mode: Mode::Hil,
-        report,
-        driven: &sim.trajectory,
-        trace: trace.as_ref(),
-    };
-    let verdict = judge_and_write(
-        sc,
-        end,
-        config.perception.detection_radius,
-        &options.results,
-        measured,
-    )?;
-    Ok((verdict, outcome))
+    result
 }
 
 /// The outcome of a run stopped by signal (Ctrl-C) at `time`.
@@ -593,17 +605,9 @@ fn write_run_files(
 ) -> Result<(PathBuf, PathBuf), HilError> {
     let write = |name: &str, text: String| {
         let path = options.results.join(name);
-        std::fs::write(&path, text).map_err(|source| {
-            HilError::Results(crate::verdict::ResultsError::Write {
-                path: path.display().to_string(),
-                source,
-            })
-        })
+        std::fs::write(&path, text).map_err(|source| results_error(&path, source))
     };
-    write(
-        "wires.json",
-        serde_json::to_string_pretty(map).unwrap_or_default(),
-    )?;
+    write_wires(options, map)?;
     // The controller's configuration: given to the binary started here, and left for
     // a controller started by the user or flashed to a board.
     // The mission for a controller of one's own (docs/wire-contract.md); controller.toml
@@ -615,6 +619,20 @@ fn write_run_files(
     let trace_path = options.results.join("controller-trace.jsonl");
     let _ = std::fs::remove_file(&trace_path);
     Ok((config_path, trace_path))
+}
+
+/// `wires.json` into the results, whole or not at all ([`WireMap::write`]).
+fn write_wires(options: &HilOptions, map: &WireMap) -> Result<(), HilError> {
+    map.write(&options.results)
+        .map_err(|source| results_error(&options.results.join(WireMap::FILE), source))
+}
+
+/// An error writing `path` of the results.
+fn results_error(path: &std::path::Path, source: std::io::Error) -> HilError {
+    HilError::Results(crate::verdict::ResultsError::Write {
+        path: path.display().to_string(),
+        source,
+    })
 }
 
 /// With no controller started here: when asked to (`--wait-for-controller`) or when

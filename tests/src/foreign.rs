@@ -12,12 +12,14 @@ use anyhow::{Context, Result, ensure};
 
 use crate::{TestVcan, a_hil_run_that_passed, every_frame_passed_the_e2e_checks, workspace_bin};
 
-/// What one run of a controller in HIL left: ugv-sim's exit status, verdict and stderr,
-/// the controller's exit status (None: it did not end by itself) and stderr.
+/// What one run of a controller in HIL left: ugv-sim's exit status, verdict, last
+/// `wires.json` and stderr, the controller's exit status (None: it did not end by
+/// itself) and stderr.
 #[derive(Debug)]
 pub struct ForeignRun {
     pub sim: ExitStatus,
     pub verdict: serde_json::Value,
+    pub wires: serde_json::Value,
     pub stderr: String,
     pub controller: Option<ExitStatus>,
     pub ctl: String,
@@ -116,13 +118,47 @@ pub fn run_foreign_controller(
     );
     let verdict: serde_json::Value = serde_json::from_slice(&std::fs::read(&sim_out)?)
         .context("the verdict on ugv-sim's stdout")?;
+    let wires: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(results.join("wires.json"))?)
+            .context("wires.json after the run")?;
+    ended_on_the_wires(sim_status, &verdict, &wires)?;
     Ok(ForeignRun {
         sim: sim_status,
         verdict,
+        wires,
         stderr,
         controller: controller_status,
         ctl,
     })
+}
+
+/// The end of the run as docs/wire-contract.md promises it on the wires: the last
+/// `wires.json` (written before the wires closed) says `ended`, with the verdict's
+/// outcome and the simulator's exit code.
+fn ended_on_the_wires(
+    sim: ExitStatus,
+    verdict: &serde_json::Value,
+    wires: &serde_json::Value,
+) -> Result<()> {
+    let end = &wires["end"];
+    ensure!(
+        wires["state"] == "ended",
+        "wires.json after the run: {wires}"
+    );
+    for key in ["outcome", "passed", "goal_reached"] {
+        ensure!(
+            end[key] == verdict[key],
+            "wires.json's end.{key} {} but the verdict's {}",
+            end[key],
+            verdict[key]
+        );
+    }
+    ensure!(
+        end["time_s"] == verdict["time"] && end["exit_code"].as_i64() == sim.code().map(i64::from),
+        "wires.json's end {end}, the verdict's time {}, ugv-sim's exit {sim:?}",
+        verdict["time"]
+    );
+    Ok(())
 }
 
 /// The run every example promises: the goal reached round the post without collision,
@@ -132,6 +168,7 @@ pub fn drove_round_the_post_to_the_goal(run: &ForeignRun) -> Result<()> {
     let ForeignRun {
         sim,
         verdict,
+        wires: _,
         stderr,
         controller,
         ctl,

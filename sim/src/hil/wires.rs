@@ -16,12 +16,76 @@ use crate::devices::cola_driver::ColaDriverThread;
 use crate::devices::gps::GpsPort;
 use crate::devices::laser::LaserProfile;
 use crate::devices::map::{ControllerSite, GpsOutput, LaserSource};
+use crate::exit::Exit;
 use crate::measure::{GpsLineStats, WireStats};
+use crate::run::Outcome;
 use crate::scenario::Scenario;
+use crate::verdict::Verdict;
 
 /// The version of `wires.json`'s layout ([`WireMap`], its first key): raised when a key
-/// changes meaning or goes away (docs/wire-contract.md, "Finding the wires").
+/// changes meaning or goes away (docs/wire-contract.md, "Finding the wires"); new keys
+/// (`state` and `end`, issue 35) may appear without it.
 pub const WIRES_VERSION: u32 = 1;
+
+/// Where the run is: `wires.json`'s `state`, rewritten as the run goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunState {
+    /// The wires are open; the simulator starts the controller or waits for its
+    /// heartbeat.
+    #[default]
+    Waiting,
+    /// The clock runs.
+    Running,
+    /// The run is over and judged (`end` says how, `verdict.json` is written); the
+    /// wires close next.
+    Ended,
+}
+
+/// How a run ended: `wires.json`'s `end` once `state` is `ended`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RunEnded {
+    /// `goal_reached`, `collision`, `time_limit`, `stopped` (Ctrl-C, the controller
+    /// exited), or `error` (the run could not start or go on; `reason` says why).
+    pub outcome: String,
+    /// The verdict's criteria met (false on an error).
+    pub passed: bool,
+    pub goal_reached: bool,
+    /// Simulated seconds at the end; `null` on an error.
+    pub time_s: Option<f64>,
+    /// Why it did not pass (the verdict's failures, joined by "; ") or the error;
+    /// `null` when it passed.
+    pub reason: Option<String>,
+    /// The code `ugv-sim run` exits with ([`crate::exit`]).
+    pub exit_code: u8,
+}
+
+impl RunEnded {
+    /// The end of a run that gave `result`.
+    pub fn of(result: &Result<(Verdict, Outcome), HilError>) -> RunEnded {
+        match result {
+            Ok((verdict, outcome)) => RunEnded {
+                outcome: serde_json::to_value(outcome)
+                    .ok()
+                    .and_then(|v| v["outcome"].as_str().map(str::to_owned))
+                    .unwrap_or_default(),
+                passed: verdict.passed,
+                goal_reached: verdict.goal_reached,
+                time_s: Some(verdict.time()),
+                reason: (!verdict.passed).then(|| verdict.failures.join("; ")),
+                exit_code: Exit::of_run(outcome, verdict.passed).code(),
+            },
+            Err(e) => RunEnded {
+                outcome: "error".to_owned(),
+                passed: false,
+                goal_reached: false,
+                time_s: None,
+                reason: Some(e.to_string()),
+                exit_code: Exit::Setup.code(),
+            },
+        }
+    }
+}
 
 /// Where the wires are, for the user and for the controller (`wires.json`).
 #[derive(Clone, Debug, serde::Serialize)]
@@ -44,6 +108,25 @@ pub struct WireMap {
     pub controller: String,
     /// The clock wire in lockstep (`ugv-hil/<run id>/clock`), `null` in real time.
     pub clock_service: Option<String>,
+    /// Where the run is.
+    pub state: RunState,
+    /// How it ended, once it has (`null` before).
+    pub end: Option<RunEnded>,
+}
+
+impl WireMap {
+    /// The file name in the run's results.
+    pub const FILE: &str = "wires.json";
+
+    /// Write the map into `dir` whole or not at all: into a temporary file beside
+    /// `wires.json`, renamed over it, so a reader sees the last state or the one
+    /// before, never a part.
+    pub fn write(&self, dir: &Path) -> std::io::Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        let partial = dir.join(".wires.json.partial");
+        std::fs::write(&partial, text)?;
+        std::fs::rename(&partial, dir.join(Self::FILE))
+    }
 }
 
 /// Where the simulated scans go.
@@ -259,6 +342,8 @@ impl Wires {
                     ControllerSite::Board { can } => format!("board on {can}"),
                 },
                 clock_service: lockstep.as_ref().map(|l| l.leader.service().to_owned()),
+                state: RunState::Waiting,
+                end: None,
             },
             gps,
             laser: laser.out,
@@ -314,10 +399,8 @@ impl Wires {
 mod tests {
     use super::*;
 
-    #[test]
-    fn wires_json_starts_with_its_version_and_has_the_documented_keys()
-    -> Result<(), serde_json::Error> {
-        let map = WireMap {
+    fn map() -> WireMap {
+        WireMap {
             version: WIRES_VERSION,
             gps_link: PathBuf::from("/tmp/ugv-hil-x-gps"),
             gps_baud: 115_200,
@@ -328,8 +411,15 @@ mod tests {
             gateways: vec![("can1".to_owned(), vec!["STEERING_ECU"])],
             controller: "local".to_owned(),
             clock_service: None,
-        };
-        let json = serde_json::to_string(&map)?;
+            state: RunState::Waiting,
+            end: None,
+        }
+    }
+
+    #[test]
+    fn wires_json_starts_with_its_version_and_has_the_documented_keys()
+    -> Result<(), serde_json::Error> {
+        let json = serde_json::to_string(&map())?;
         assert!(json.starts_with("{\"version\":1,"), "{json}");
         let value: serde_json::Value = serde_json::from_str(&json)?;
         let mut keys: Vec<&str> = value
@@ -349,12 +439,83 @@ mod tests {
             "gateways",
             "controller",
             "clock_service",
+            "state",
+            "end",
         ];
         documented.sort_unstable();
         assert_eq!(keys, documented);
         assert_eq!(
             value["gateways"],
             serde_json::json!([["can1", ["STEERING_ECU"]]])
+        );
+        Ok(())
+    }
+
+    /// `dir/wires.json` as JSON.
+    fn read(dir: &Path) -> Result<serde_json::Value, Box<dyn std::error::Error>> {
+        Ok(serde_json::from_str(&std::fs::read_to_string(
+            dir.join(WireMap::FILE),
+        )?)?)
+    }
+
+    #[test]
+    fn wires_json_is_rewritten_whole_and_ends_saying_how_the_run_ended()
+    -> Result<(), Box<dyn std::error::Error>> {
+        let dir = tempfile::tempdir()?;
+        let mut map = map();
+        map.write(dir.path())?;
+        let v = read(dir.path())?;
+        assert_eq!(
+            (&v["state"], &v["end"]),
+            (&"waiting".into(), &serde_json::Value::Null)
+        );
+        map.state = RunState::Running;
+        map.write(dir.path())?;
+        assert_eq!(read(dir.path())?["state"], "running");
+
+        // A run that reached its time limit, as the HIL run judges it.
+        let sc = Scenario::paper()?;
+        let bus = firmware_bridge::can::membus::MemBus::new();
+        let port = || firmware_bridge::CanPort::new(bus.endpoint(), "mem");
+        let sim = crate::run::Sim::new(sc.clone(), port(), port());
+        let outcome = Outcome::TimeLimit { time: 60.0 };
+        let verdict = Verdict::judge(crate::Mode::Hil, &sc, sim.report(outcome.clone()), None);
+        map.state = RunState::Ended;
+        map.end = Some(RunEnded::of(&Ok((verdict, outcome))));
+        map.write(dir.path())?;
+        let v = read(dir.path())?;
+        assert_eq!(v["state"], "ended");
+        let end = &v["end"];
+        assert_eq!(
+            (&end["outcome"], &end["passed"], &end["goal_reached"]),
+            (&"time_limit".into(), &false.into(), &false.into()),
+            "{v}"
+        );
+        assert_eq!(
+            (&end["time_s"], &end["exit_code"]),
+            (&60.0.into(), &5.into())
+        );
+        assert!(
+            end["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("goal not reached")),
+            "{end}"
+        );
+        // Renamed into place: nothing else is left in the folder.
+        let names: Vec<_> = std::fs::read_dir(dir.path())?
+            .map(|e| e.map(|e| e.file_name()))
+            .collect::<Result<_, _>>()?;
+        assert_eq!(names, vec![std::ffi::OsString::from(WireMap::FILE)]);
+
+        // A run that could not go on.
+        let end = RunEnded::of(&Err(HilError::Clock("the clock wire broke".to_owned())));
+        assert_eq!(
+            (end.outcome.as_str(), end.passed, end.time_s, end.exit_code),
+            ("error", false, None, 4)
+        );
+        assert!(
+            end.reason
+                .is_some_and(|r| r.contains("the clock wire broke"))
         );
         Ok(())
     }
