@@ -103,6 +103,8 @@ PIP_PKGS=(
     kubernetes==37.0.2  # the API models sim/tests/deploy.rs validates deploy/k8s/suite-job.yaml against
     pyyaml==6.0.3       # YAML for the same test (the manifest, the GitHub Actions workflow)
     mcap==1.6.0         # an independent MCAP reader: tests/tests/record.rs opens run.mcap with it
+    mcap-protobuf-support==0.6.0  # its protobuf decoder: the Foxglove panels' check (record_common/foxglove_panels.py)
+    protobuf==7.36.2    # what that decoder decodes the messages with, from the schemas in the file
     websockets==15.0.1  # a Foxglove WebSocket client that is not the SDK: sim/tests/live_view.rs (live_client.py)
 )
 PY=${PYTHON:-python3}

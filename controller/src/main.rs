@@ -32,7 +32,7 @@ use firmware_bridge::realtime;
 use ugv_controller::config::{ControllerConfig, FollowerKind};
 use ugv_controller::control::{COMMAND_PERIOD, Controller, Mode};
 use ugv_controller::lockstep::{GatedGps, SimClock};
-use ugv_controller::record::{RunInfo, Writer};
+use ugv_controller::record::{Mounts, RunInfo, Writer};
 use ugv_controller::runtime::{Exit, GpsInput, LaserInput, Runtime, SIMULATOR_PID_ENV};
 use ugv_controller::trace::TraceWriter;
 
@@ -417,7 +417,8 @@ fn with_recording<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can>(
         cfg,
     )?;
     let writer = Writer::create(Some(dir), foxglove::Context::new(), info)
-        .with_context(|| format!("--record: recording into {}", dir.display()))?;
+        .with_context(|| format!("--record: recording into {}", dir.display()))?
+        .with_mounts(Mounts::of(&cfg.vehicle));
     rt.with_recorder(writer)
         .context("--record: starting the recorder's thread")
 }

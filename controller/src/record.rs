@@ -3,9 +3,12 @@
 //! controller's own (`ugv-controller run --record DIR`, on the car or on the bench).
 //!
 //! - `run.mcap` (Foxglove SDK, its built-in schemas): the laser as
-//!   `foxglove.LaserScan`, every CAN frame raw and decoded per golf_car.dbc (JSON), the
-//!   NMEA sentences (JSON), the controller's state (JSON) and planned paths
-//!   (`foxglove.SceneUpdate`), topics in [`topics`].
+//!   `foxglove.LaserScan`, the GPS fix as `foxglove.LocationFix`, the car as
+//!   `foxglove.FrameTransform` world -> base_link with the sensors' mounts base_link ->
+//!   laser and base_link -> gps ([`Mounts`]), every CAN frame raw and decoded per
+//!   golf_car.dbc (JSON), the NMEA sentences (JSON), the controller's state (JSON) and
+//!   planned paths (`foxglove.SceneUpdate`), topics in [`topics`]. Every message's frame
+//!   has a chain of transforms to `world`, so Foxglove's 3D and map panels show it all.
 //! - `bus.log`: every CAN frame in `candump -l` form, for canplayer and `ugv-can decode`.
 //! - `gps.nmea`: the NMEA byte stream exactly as it went over the line, for gpsfake.
 //!
@@ -18,9 +21,11 @@
 //! The controller's own recording ([`RecordMode::Field`]) is made at its loop's seam
 //! (the runtime's `Runtime::with_recorder`): every input at the tick that took it,
 //! every frame it sent, the ticks at which it took its replannings from the planning
-//! thread, the ticks it skipped and the one it was asked to stop at, on its clock (log time = the wall clock at its
-//! start + its time). A replay feeds the same inputs at the same ticks into the same
-//! code and gets the same frames, byte for byte.
+//! thread, the ticks it skipped and the one it was asked to stop at, on its clock (log
+//! time = the wall clock at its start + its time); besides, for the viewer, each fix it
+//! read and its own estimate of the car's pose as world -> base_link. A replay feeds
+//! the same inputs at the same ticks into the same code and gets the same frames, byte
+//! for byte.
 
 pub mod topics;
 
@@ -34,8 +39,10 @@ use std::time::{Duration, Instant, SystemTime};
 use firmware_bridge::can::TapFrame;
 use firmware_bridge::clock::unix_ns;
 use firmware_bridge::laser::LaserFrame;
+use firmware_bridge::nmea::{Accuracy, GpsFix, GpsReading};
 use foxglove::schemas::{
-    Color, LaserScan, LinePrimitive, Point3, SceneEntity, SceneUpdate, Timestamp,
+    Color, FrameTransform, LaserScan, LinePrimitive, LocationFix, Point3, Quaternion, SceneEntity,
+    SceneUpdate, Timestamp, Vector3,
 };
 use foxglove::{Channel, Context, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel};
 use golf_car_can::candump::Compact;
@@ -58,6 +65,13 @@ pub const CHUNK_SIZE: u64 = 1 << 20;
 
 /// Seconds between two controller states when nothing changed.
 const STATE_PERIOD: f64 = 0.1;
+
+/// Seconds between two poses of the car (world -> base_link; the loop may run faster).
+pub const POSE_PERIOD: f64 = 0.02;
+
+/// Seconds between two copies of the sensors' mounts (static, but a live viewer may
+/// connect late, and a player may start anywhere).
+const MOUNTS_PERIOD: f64 = 1.0;
 
 /// The longest NMEA line kept while waiting for its end: bytes that never end a line
 /// (noise on the wire) are logged as one at this length.
@@ -211,6 +225,52 @@ pub fn describe(s: &RecordSummary) -> String {
     )
 }
 
+/// Where the car's sensors sit in its frame `base_link` (the rear axle's centre, x
+/// forward, y left): the static transforms base_link -> laser and base_link -> gps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mounts {
+    /// The scanner: x, y (m) and yaw (rad, counter-clockwise).
+    pub laser: [f64; 3],
+    /// The GPS antenna: x, y and its height z (m).
+    pub gps: [f64; 3],
+}
+
+impl Mounts {
+    /// The mounts the controller's configuration states (the antenna's height is not
+    /// in it: 0).
+    pub fn of(v: &crate::config::Vehicle) -> Mounts {
+        Mounts {
+            laser: [v.laser_x, v.laser_y, v.laser_yaw_deg.to_radians()],
+            gps: [v.antenna_x, v.antenna_y, 0.0],
+        }
+    }
+}
+
+/// A quaternion for a yaw about +z.
+pub fn yaw(theta: f64) -> Quaternion {
+    Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: (theta / 2.0).sin(),
+        w: (theta / 2.0).cos(),
+    }
+}
+
+/// The transform `parent` -> `child` at `ns`: a translation and a yaw.
+fn transform(ns: u64, parent: &str, child: &str, at: [f64; 3], theta: f64) -> FrameTransform {
+    FrameTransform {
+        timestamp: Some(timestamp(ns)),
+        parent_frame_id: parent.to_owned(),
+        child_frame_id: child.to_owned(),
+        translation: Some(Vector3 {
+            x: at[0],
+            y: at[1],
+            z: at[2],
+        }),
+        rotation: Some(yaw(theta)),
+    }
+}
+
 /// A Foxglove timestamp of `ns` since 1970.
 pub fn timestamp(ns: u64) -> Timestamp {
     Timestamp::new(
@@ -296,6 +356,11 @@ pub struct Writer {
     ctx: Arc<Context>,
     mcap: Option<McapWriterHandle<BufWriter<File>>>,
     laser: Option<Channel<LaserScan>>,
+    fix: Channel<LocationFix>,
+    tf: Channel<FrameTransform>,
+    /// The sensors' mounts, logged with the car's pose ([`Writer::with_mounts`]).
+    mounts: Option<Mounts>,
+    next_mounts: f64,
     plans: Channel<SceneUpdate>,
     can_raw: Arc<RawChannel>,
     can_decoded: Arc<RawChannel>,
@@ -379,6 +444,10 @@ impl Writer {
         };
         Ok(Writer {
             laser: None,
+            fix: ctx.channel_builder(topics::FIX).build(),
+            tf: ctx.channel_builder(topics::TF).build(),
+            mounts: None,
+            next_mounts: 0.0,
             plans: ctx.channel_builder(topics::PLANS).build(),
             can_raw: json(topics::CAN_RAW)?,
             can_decoded: json(topics::CAN_DECODED)?,
@@ -401,6 +470,12 @@ impl Writer {
             },
             ctx,
         })
+    }
+
+    /// Log the sensors' `mounts` with the car's pose ([`Writer::base_link`]).
+    pub fn with_mounts(mut self, mounts: Mounts) -> Writer {
+        self.mounts = Some(mounts);
+        self
     }
 
     /// The count of what was logged, to add to.
@@ -475,6 +550,72 @@ impl Writer {
             }
             self.log_json(&self.nmea, t, &m);
             self.summary.nmea_sentences += 1;
+        }
+    }
+
+    /// A GPS epoch's fix at `t`, as the receiver sent it.
+    pub fn fix(&mut self, t: f64, f: &GpsFix) {
+        let at = [f.lat_deg, f.lon_deg, f.ellipsoid_height_m];
+        self.location_fix(t, at, f.accuracy.as_ref(), f.heading_deg);
+    }
+
+    /// A GPS epoch at `t` as the controller read it; none without a position.
+    pub fn reading(&mut self, t: f64, r: &GpsReading) {
+        if let (Some(lat), Some(lon)) = (r.lat_deg, r.lon_deg) {
+            // GGA's altitude is above mean sea level: the ellipsoid is the geoid's
+            // separation below.
+            let alt = r.altitude_msl_m.unwrap_or(0.0) + r.geoid_separation_m.unwrap_or(0.0);
+            self.location_fix(t, [lat, lon, alt], r.accuracy.as_ref(), r.heading_deg);
+        }
+    }
+
+    /// `foxglove.LocationFix` in frame `gps` (the antenna) at `t`: latitude, longitude
+    /// (degrees) and height above the ellipsoid (m) `at`, the GST's sigmas as a diagonal
+    /// covariance when known, the true heading.
+    fn location_fix(
+        &mut self,
+        t: f64,
+        at: [f64; 3],
+        accuracy: Option<&Accuracy>,
+        heading_deg: Option<f64>,
+    ) {
+        let sigma = accuracy.map(|a| [a.lat_sigma_m, a.lon_sigma_m, a.alt_sigma_m]);
+        let ns = self.ns(t);
+        self.fix.log_with_time(
+            &LocationFix {
+                timestamp: Some(timestamp(ns)),
+                frame_id: "gps".to_owned(),
+                latitude: at[0],
+                longitude: at[1],
+                altitude: at[2],
+                // Diagonal covariance from GST (type 2, diagonal known), else unknown.
+                position_covariance: sigma.map_or_else(Vec::new, |[n, e, u]| {
+                    vec![e * e, 0.0, 0.0, 0.0, n * n, 0.0, 0.0, 0.0, u * u]
+                }),
+                position_covariance_type: if sigma.is_some() { 2 } else { 0 },
+                heading: heading_deg,
+                ..LocationFix::default()
+            },
+            ns,
+        );
+        self.summary.fixes += 1;
+    }
+
+    /// The car at `t` as world -> base_link (the rear axle at x, y, heading `theta`),
+    /// and the sensors' mounts with it when they are due.
+    pub fn base_link(&mut self, t: f64, x: f64, y: f64, theta: f64) {
+        let ns = self.ns(t);
+        self.tf
+            .log_with_time(&transform(ns, "world", "base_link", [x, y, 0.0], theta), ns);
+        if let Some(m) = self.mounts
+            && t + 1e-9 >= self.next_mounts
+        {
+            self.next_mounts = t + MOUNTS_PERIOD;
+            let [lx, ly, lyaw] = m.laser;
+            let laser = transform(ns, "base_link", "laser", [lx, ly, 0.0], lyaw);
+            self.tf.log_with_time(&laser, ns);
+            self.tf
+                .log_with_time(&transform(ns, "base_link", "gps", m.gps, 0.0), ns);
         }
     }
 
@@ -788,6 +929,8 @@ enum Entry {
     Json(&'static str, f64, serde_json::Value),
     State(f64, serde_json::Value),
     Plan(f64, Planned),
+    Fix(f64, Box<GpsReading>),
+    Pose(f64, [f64; 3]),
 }
 
 /// Entries queued for the [`BackgroundWriter`]'s thread before the loop drops them
@@ -803,6 +946,8 @@ pub struct BackgroundWriter {
     queue: Option<std::sync::mpsc::SyncSender<Entry>>,
     thread: Option<std::thread::JoinHandle<Option<RecordSummary>>>,
     cadence: StateCadence,
+    /// When the controller's pose estimate is next due ([`POSE_PERIOD`]).
+    next_pose: f64,
     dropped: u64,
 }
 
@@ -827,6 +972,7 @@ impl BackgroundWriter {
             queue: Some(queue),
             thread: Some(thread),
             cadence: StateCadence::default(),
+            next_pose: 0.0,
             dropped: 0,
         })
     }
@@ -861,7 +1007,14 @@ impl BackgroundWriter {
         self.send(Entry::Json(topic, t, value));
     }
 
-    /// See [`Writer::controller`].
+    /// A GPS epoch the controller read at `t` ([`Writer::reading`]).
+    pub fn reading(&mut self, t: f64, r: &GpsReading) {
+        self.send(Entry::Fix(t, Box::new(r.clone())));
+    }
+
+    /// See [`Writer::controller`]; and the controller's estimate of the car's pose as
+    /// world -> base_link every [`POSE_PERIOD`] (in the controller's own recording
+    /// only: the simulator's has the true pose there).
     pub fn controller(&mut self, t: f64, ctl: &Controller) {
         let (state, plans) = self.cadence.take(t, ctl);
         if let Some(state) = state {
@@ -869,6 +1022,12 @@ impl BackgroundWriter {
         }
         for planned in plans {
             self.send(Entry::Plan(t, planned));
+        }
+        if t + 1e-9 >= self.next_pose
+            && let Some(p) = ctl.pose(t)
+        {
+            self.next_pose = t + POSE_PERIOD;
+            self.send(Entry::Pose(t, [p.x, p.y, p.theta]));
         }
     }
 
@@ -905,6 +1064,8 @@ impl Writer {
             Entry::Json(topic, t, value) => self.log_other(topic, t, &value),
             Entry::State(t, value) => self.log_json(&self.state, t, &value),
             Entry::Plan(t, planned) => self.plan(t, &planned),
+            Entry::Fix(t, reading) => self.reading(t, &reading),
+            Entry::Pose(t, [x, y, theta]) => self.base_link(t, x, y, theta),
         }
     }
 }

@@ -420,6 +420,9 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                 Ok(events) => {
                     for event in events {
                         if let ReadEvent::Fix(reading) = event {
+                            if let Some(w) = &mut self.recorder {
+                                w.reading(now, &reading);
+                            }
                             if let (Some(_), Some(t)) = (&self.fix_timing, reading.time) {
                                 self.unanswered.push((
                                     f64::from(t.num_seconds_from_midnight())

@@ -2,7 +2,8 @@
 //!
 //! - `run.mcap` (Foxglove SDK, its built-in schemas): the laser as
 //!   `foxglove.LaserScan`, the fix as `foxglove.LocationFix`, the car as
-//!   `foxglove.FrameTransform` and `foxglove.PoseInFrame`, obstacles and the
+//!   `foxglove.FrameTransform` (world -> base_link, with the scenario's sensor mounts
+//!   base_link -> laser and base_link -> gps) and `foxglove.PoseInFrame`, obstacles and the
 //!   controller's planned paths as `foxglove.SceneUpdate`, every CAN frame raw and
 //!   decoded per golf_car.dbc (JSON), the NMEA sentences as sent, the controller's
 //!   state (JSON). Log time is simulated time on the scenario's UTC epoch; in HIL the
@@ -43,8 +44,8 @@ use std::sync::Arc;
 use foxglove::Channel;
 use foxglove::Context;
 use foxglove::schemas::{
-    Color, CylinderPrimitive, FrameTransform, LinePrimitive, LocationFix, Point3, Pose,
-    PoseInFrame, Quaternion, SceneEntity, SceneUpdate, Vector3,
+    Color, CylinderPrimitive, LinePrimitive, Point3, Pose, PoseInFrame, SceneEntity, SceneUpdate,
+    Vector3,
 };
 
 use crate::devices::gps::GpsEpoch;
@@ -53,18 +54,16 @@ use crate::scenario::{Obstacle, Scenario};
 use crate::vehicle::VehicleState;
 use tap::{BusTap, TapFrame};
 use ugv_controller::control::Controller;
-use ugv_controller::record::Writer;
 pub use ugv_controller::record::{
     BUS_LOG, CHUNK_SIZE, CONFIG_ATTACHMENT, FLUSH_PERIOD, MCAP_FILE, NMEA_FILE, RUN_METADATA,
     RecordError, RecordMode, RecordSummary, RunInfo, describe, direction, timestamp, topics,
 };
+use ugv_controller::record::{Mounts, POSE_PERIOD, Writer, yaw};
 
 /// The directory under a HIL run's results where the controller `ugv-sim run
 /// --controller-log` starts records its own ports (`ugv-controller run --record`).
 pub const CONTROLLER_LOG_DIR: &str = "controller";
 
-/// Seconds between two vehicle poses (the physics may run faster).
-const POSE_PERIOD: f64 = 0.02;
 /// Seconds between two obstacle scenes when something moves (else one a second, for
 /// live viewers who connect late).
 const SCENE_PERIOD_MOVING: f64 = 0.1;
@@ -81,16 +80,6 @@ pub fn run_info(mode: RecordMode, sc: &Scenario, controller_toml: String) -> Run
         gps_sentences: sc.gps.sentence_set(),
         gps_baud: sc.gps.baud,
         controller_toml,
-    }
-}
-
-/// A quaternion for a yaw about +z.
-fn yaw(theta: f64) -> Quaternion {
-    Quaternion {
-        x: 0.0,
-        y: 0.0,
-        z: (theta / 2.0).sin(),
-        w: (theta / 2.0).cos(),
     }
 }
 
@@ -120,8 +109,6 @@ impl Outputs<'_> {
 
 /// The world's MCAP channels (the rest are the [`Writer`]'s).
 struct WorldChannels {
-    fix: Channel<LocationFix>,
-    tf: Channel<FrameTransform>,
     pose: Channel<PoseInFrame>,
     obstacles: Channel<SceneUpdate>,
 }
@@ -153,12 +140,18 @@ impl Recorder {
             None => Context::new(),
         };
         let ch = WorldChannels {
-            fix: ctx.channel_builder(topics::FIX).build(),
-            tf: ctx.channel_builder(topics::TF).build(),
             pose: ctx.channel_builder(topics::POSE).build(),
             obstacles: ctx.channel_builder(topics::OBSTACLES).build(),
         };
-        let w = Writer::create(out.dir, ctx, info)?;
+        let mounts = Mounts {
+            laser: [
+                sc.laser.mount_x,
+                sc.laser.mount_y,
+                sc.laser.mount_yaw_deg.to_radians(),
+            ],
+            gps: [sc.gps.antenna_x, sc.gps.antenna_y, sc.gps.antenna_z],
+        };
+        let w = Writer::create(out.dir, ctx, info)?.with_mounts(mounts);
         let obstacles = sc.obstacles.clone();
         let moving = obstacles.iter().any(|o| {
             matches!(
@@ -194,29 +187,7 @@ impl Recorder {
 
     fn gps(&mut self, t: f64, epoch: &GpsEpoch) {
         self.w.nmea(t, epoch.text.as_bytes());
-        let f = &epoch.fix;
-        let sigma = f
-            .accuracy
-            .map(|a| [a.lat_sigma_m, a.lon_sigma_m, a.alt_sigma_m]);
-        let ns = self.w.ns(t);
-        self.ch.fix.log_with_time(
-            &LocationFix {
-                timestamp: Some(timestamp(ns)),
-                frame_id: "gps".to_owned(),
-                latitude: f.lat_deg,
-                longitude: f.lon_deg,
-                altitude: f.ellipsoid_height_m,
-                // Diagonal covariance from GST (type 2, diagonal known), else unknown.
-                position_covariance: sigma.map_or_else(Vec::new, |[n, e, u]| {
-                    vec![e * e, 0.0, 0.0, 0.0, n * n, 0.0, 0.0, 0.0, u * u]
-                }),
-                position_covariance_type: if sigma.is_some() { 2 } else { 0 },
-                heading: f.heading_deg,
-                ..LocationFix::default()
-            },
-            ns,
-        );
-        self.w.summary_mut().fixes += 1;
+        self.w.fix(t, &epoch.fix);
     }
 
     /// One CAN frame seen on the bus at simulated time `t`.
@@ -229,20 +200,7 @@ impl Recorder {
         if t + 1e-9 >= self.next_pose {
             self.next_pose = t + POSE_PERIOD;
             let ns = self.w.ns(t);
-            self.ch.tf.log_with_time(
-                &FrameTransform {
-                    timestamp: Some(timestamp(ns)),
-                    parent_frame_id: "world".to_owned(),
-                    child_frame_id: "base_link".to_owned(),
-                    translation: Some(Vector3 {
-                        x: v.x,
-                        y: v.y,
-                        z: 0.0,
-                    }),
-                    rotation: Some(yaw(v.theta)),
-                },
-                ns,
-            );
+            self.w.base_link(t, v.x, v.y, v.theta);
             self.ch.pose.log_with_time(
                 &PoseInFrame {
                     timestamp: Some(timestamp(ns)),

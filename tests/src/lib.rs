@@ -208,9 +208,25 @@ impl Drop for NullModem {
 /// time; whether the file was complete), read independently of ugv-sim. `PYTHON`
 /// chooses the interpreter.
 pub fn mcap_summary(path: &std::path::Path) -> anyhow::Result<serde_json::Value> {
+    python_on_mcap("mcap_summary.py", path)
+}
+
+/// What Foxglove's 3D and map panels would find in an MCAP file, read with the Python
+/// `mcap` package and the protobuf schemas in the file (tests/record_common/
+/// foxglove_panels.py: per topic its schema and encodings, every transform parent ->
+/// child with its first and last translation, the frames of the messages and those
+/// with no chain of transforms to `world`, the fixes' ranges). `PYTHON` chooses the
+/// interpreter.
+pub fn foxglove_panels(path: &std::path::Path) -> anyhow::Result<serde_json::Value> {
+    python_on_mcap("foxglove_panels.py", path)
+}
+
+/// tests/record_common/`script` run on `path`: the JSON it prints.
+fn python_on_mcap(script: &str, path: &std::path::Path) -> anyhow::Result<serde_json::Value> {
     let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".to_owned());
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/record_common/mcap_summary.py");
+        .join("tests/record_common")
+        .join(script);
     let out = Command::new(&python)
         .arg(&script)
         .arg(path)
@@ -218,7 +234,7 @@ pub fn mcap_summary(path: &std::path::Path) -> anyhow::Result<serde_json::Value>
         .map_err(|e| anyhow::anyhow!("running {python} (set PYTHON to choose another): {e}"))?;
     anyhow::ensure!(
         out.status.success(),
-        "{} (needs mcap==1.6.0 from scripts/install-deps.sh): {}",
+        "{} (needs the Python packages of scripts/install-deps.sh: mcap, mcap-protobuf-support): {}",
         script.display(),
         String::from_utf8_lossy(&out.stderr)
     );

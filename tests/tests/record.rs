@@ -644,3 +644,126 @@ fn recording_arguments_are_refused_naming_what_is_wrong() {
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
     }
 }
+
+/// The frame ids of `topic`'s messages in a [`ugv_e2e_tests::foxglove_panels`] report.
+fn frames<'a>(panels: &'a Value, topic: &str) -> Vec<&'a str> {
+    panels["frames"][topic]
+        .as_array()
+        .unwrap_or_else(|| panic!("no frames on {topic}: {panels}"))
+        .iter()
+        .filter_map(Value::as_str)
+        .collect()
+}
+
+/// Both recordings of a SIL run of the paper's scenario, the simulator's (run.mcap)
+/// and the controller's own (`ugv-controller run --log`, made by the library's loop
+/// in the same run), read with the Python `mcap` package and the protobuf schemas in
+/// the files, hold what Foxglove's 3D panel and map panel need (issue 35): the
+/// Foxglove schemas by name, protobuf-encoded; the fix as `foxglove.LocationFix`
+/// near the scenario's datum; world -> base_link, and the mounts base_link -> laser
+/// and base_link -> gps, so every message's frame has a chain to `world`; and the
+/// controller's estimate of the car ends where the simulator's car is.
+#[test]
+fn foxglove_3d_and_map_panels_find_every_frame_in_both_recordings() {
+    use ugv_controller::record::{Mounts, Writer};
+    let dir = tempfile::tempdir().unwrap();
+    let own = dir.path().join("controller");
+    std::fs::create_dir_all(&own).unwrap();
+    let sc = Scenario::paper().unwrap();
+    let cfg = controller_config(&sc, FollowerKind::Optimal);
+    let info = RunInfo::field(
+        "the paper's scenario, SIL".to_owned(),
+        sc.sim.epoch.unix_ns(),
+        "can0".to_owned(),
+        sc.gps.sentence_set(),
+        sc.gps.baud,
+        &cfg,
+    )
+    .unwrap();
+    let writer = Writer::create(Some(&own), foxglove::Context::new(), info).unwrap();
+    let mut writer = Some(writer.with_mounts(Mounts::of(&cfg.vehicle)));
+    let hook = |_: f64, rt: &mut ugv_sim::sil::SilController| {
+        if let Some(w) = writer.take() {
+            rt.record_into(w).unwrap();
+        }
+        Hook::Continue
+    };
+    run_sil_recorded(sc.clone(), &cfg, hook, Some(dir.path())).unwrap();
+    let sim = ugv_e2e_tests::foxglove_panels(&dir.path().join(MCAP_FILE)).unwrap();
+    let field = ugv_e2e_tests::foxglove_panels(&own.join(MCAP_FILE)).unwrap();
+    let v = &cfg.vehicle;
+    for (who, p, antenna_z) in [
+        ("the simulator's", &sim, sc.gps.antenna_z),
+        ("the controller's", &field, 0.0),
+    ] {
+        for (topic, schema) in [
+            (topics::LASER, "foxglove.LaserScan"),
+            (topics::FIX, "foxglove.LocationFix"),
+            (topics::TF, "foxglove.FrameTransform"),
+        ] {
+            let t = &p["topics"][topic];
+            assert_eq!(t["schema"], schema, "{who} {topic}: {t}");
+            assert_eq!(
+                (&t["schema_encoding"], &t["message_encoding"]),
+                (&"protobuf".into(), &"protobuf".into()),
+                "{who} {topic}: {t}"
+            );
+            assert!(t["count"].as_u64() > Some(100), "{who} {topic}: {t}");
+        }
+        assert_eq!(frames(p, topics::LASER), ["laser"], "{who}");
+        assert_eq!(frames(p, topics::FIX), ["gps"], "{who}");
+        assert_eq!(p["unreachable"], serde_json::json!([]), "{who}: {p}");
+        assert_eq!(p["two_parents"], serde_json::json!([]), "{who}: {p}");
+        let tf = &p["transforms"];
+        for edge in [
+            "world -> base_link",
+            "base_link -> laser",
+            "base_link -> gps",
+        ] {
+            assert_eq!(tf[edge]["unit_rotations"], true, "{who} {edge}: {tf}");
+        }
+        assert_eq!(
+            tf["base_link -> laser"]["first"],
+            serde_json::json!([v.laser_x, v.laser_y, 0.0]),
+            "{who}"
+        );
+        assert_eq!(
+            tf["base_link -> gps"]["last"],
+            serde_json::json!([v.antenna_x, v.antenna_y, antenna_z]),
+            "{who}"
+        );
+        // The map: fixes a few metres from the datum, spread over the drive (the goal
+        // is 15 m north and 30 m east: 1.3e-4 and 3.4e-4 degrees).
+        let fixes = &p["fixes"];
+        let span = |key: &str, at: f64| {
+            let r: Vec<f64> = fixes[key]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            assert!(
+                (r[0] - at).abs() < 1e-3 && (r[1] - at).abs() < 1e-3,
+                "{who} {key}: {fixes}"
+            );
+            r[1] - r[0]
+        };
+        assert!(span("lat", sc.datum.latitude) > 1e-4, "{who}: {fixes}");
+        assert!(span("lon", sc.datum.longitude) > 3e-4, "{who}: {fixes}");
+    }
+    // The simulator's world: the car's pose and the obstacles in `world`.
+    assert_eq!(frames(&sim, topics::POSE), ["world"]);
+    assert_eq!(frames(&sim, topics::OBSTACLES), ["world"]);
+    // The controller's estimate of the rear axle ends within centimetres of the true
+    // one; it read each fix the receiver sent, but for the last epoch or two.
+    let last = |p: &Value| -> Vec<f64> {
+        let at = &p["transforms"]["world -> base_link"]["last"];
+        (0..2).map(|i| at[i].as_f64().unwrap()).collect()
+    };
+    let (truth, estimate) = (last(&sim), last(&field));
+    let off = (truth[0] - estimate[0]).hypot(truth[1] - estimate[1]);
+    assert!(off < 0.2, "{truth:?} {estimate:?}");
+    let (sent, read) = (&sim["fixes"]["count"], &field["fixes"]["count"]);
+    let (sent, read) = (sent.as_u64().unwrap(), read.as_u64().unwrap());
+    assert!(read <= sent && read + 2 >= sent, "{sent} sent, {read} read");
+}
