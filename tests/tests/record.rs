@@ -656,7 +656,7 @@ fn frames<'a>(panels: &'a Value, topic: &str) -> Vec<&'a str> {
 }
 
 /// Both recordings of a SIL run of the paper's scenario, the simulator's (run.mcap)
-/// and the controller's own (`ugv-controller run --log`, made by the library's loop
+/// and the controller's own (`ugv-controller run --record`, made by the library's loop
 /// in the same run), read with the Python `mcap` package and the protobuf schemas in
 /// the files, hold what Foxglove's 3D panel and map panel need (issue 35): the
 /// Foxglove schemas by name, protobuf-encoded; the fix as `foxglove.LocationFix`
