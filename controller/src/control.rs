@@ -17,10 +17,11 @@ use serde::Serialize;
 
 use crate::config::ControllerConfig;
 use crate::guidance::{
-    Circle, FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
+    FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
 };
 use crate::localisation::{Localiser, Pose, propagate};
-use crate::perception::{Perception, PerceptionError, Pose2, Scan};
+use crate::perception::{Perception, PerceptionError, Pose2, ValidScan};
+use crate::planner::Obstacle;
 use crate::safety::intrusion::ActuationWatch;
 use crate::safety::monitor::{ActuatorMonitor, SteerCommand};
 use crate::safety::{Fault, Inputs, shows_the_laser_sees};
@@ -70,18 +71,6 @@ pub enum ControllerError {
     Guidance(#[from] GuidanceError),
     #[error("perception: {0}")]
     Perception(#[from] PerceptionError),
-}
-
-/// A laser frame as perception reads it, stamped with the controller's time.
-pub fn scan_of(frame: &firmware_bridge::laser::LaserFrame, stamp: f64) -> Scan<'_> {
-    Scan {
-        stamp,
-        angle_min: f64::from(frame.angle_min),
-        angle_increment: f64::from(frame.angle_increment),
-        range_min: f64::from(frame.range_min),
-        range_max: f64::from(frame.range_max),
-        ranges: frame.ranges(),
-    }
 }
 
 /// The controller's mode.
@@ -208,7 +197,7 @@ pub struct Controller {
     ready_since: Option<f64>,
     /// The ECUs' reports against the commands (a stuck actuator, a driver's hands).
     monitor: ActuatorMonitor,
-    obstacles: Vec<Circle>,
+    obstacles: Vec<Obstacle>,
     stop_reason: Option<String>,
     next_heartbeat: f64,
     next_command: f64,
@@ -405,7 +394,7 @@ impl Controller {
     }
 
     /// The obstacles guidance plans around.
-    pub fn obstacles(&self) -> &[Circle] {
+    pub fn obstacles(&self) -> &[Obstacle] {
         &self.obstacles
     }
 
@@ -471,14 +460,20 @@ impl Controller {
         self.loc.on_fix(now, reading);
     }
 
+    /// A laser frame taken at `now`, where a scan enters the controller: checked once,
+    /// into the [`ValidScan`] perception takes ([`Controller::on_scan`]); a frame that
+    /// is no scan is counted, as a scan perception refuses is.
+    pub fn on_laser_frame(&mut self, now: f64, frame: &firmware_bridge::laser::LaserFrame) {
+        match ValidScan::from_frame(frame, now) {
+            Ok(scan) => self.on_scan(now, &scan),
+            Err(_) => self.bad_scans += 1,
+        }
+    }
+
     /// A laser scan. Only a scan perception accepts counts as one for the laser-silence
     /// watchdog: a stream of scans it refuses (a bad frame, a mounting it cannot use)
     /// is blindness, and stops the car like silence does.
-    pub fn on_scan(&mut self, now: f64, scan: &Scan<'_>) {
-        if scan.validate().is_err() {
-            self.bad_scans += 1;
-            return;
-        }
+    pub fn on_scan(&mut self, now: f64, scan: &ValidScan<'_>) {
         // A scan whose beams are mostly dropouts (a NaN or zero-range storm) shows
         // nothing: it does not refresh the watchdog either.
         if !shows_the_laser_sees(scan) {
@@ -512,17 +507,7 @@ impl Controller {
                     yaw: at.yaw + mount.yaw,
                 };
                 self.nav.observe(now, scan, &laser, [at.x, at.y, at.yaw]);
-                self.obstacles = out
-                    .obstacles
-                    .iter()
-                    .map(|o| Circle {
-                        x: o.x,
-                        y: o.y,
-                        radius: o.radius,
-                        vx: o.vx,
-                        vy: o.vy,
-                    })
-                    .collect();
+                self.obstacles = out.planner_obstacles();
             }
             Err(_) => self.bad_scans += 1,
         }

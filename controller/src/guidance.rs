@@ -105,7 +105,7 @@ pub use align::Align;
 pub use error::{GuidanceError, ReplanError};
 pub use follower::{FollowInputs, SteeringLaw};
 pub use footprint::Footprint;
-pub use frame::{Circle, PathFrame};
+pub use frame::PathFrame;
 pub use pacing::{Pacing, sweep};
 pub use reverse::Reverse;
 pub use solver::{ManoeuvreRecord, Pass, PlanOutcome, PlanRecord, PlanRequest, solve};
@@ -315,7 +315,7 @@ pub struct Navigator {
 struct Replanning<'a> {
     now: f64,
     pose: &'a Pose,
-    obstacles: &'a [Circle],
+    obstacles: &'a [planner::Obstacle],
     s: f64,
     here: RoutePoint,
 }
@@ -367,7 +367,7 @@ impl Navigator {
     /// once that near), moved on along the route, or else back towards the car, until
     /// it lies outside every inflated static obstacle; the nominal one when none does
     /// (the planner then finds no path, and the car stops).
-    pub fn local_goal(&self, s: f64, obstacles: &[Circle]) -> RoutePoint {
+    pub fn local_goal(&self, s: f64, obstacles: &[planner::Obstacle]) -> RoutePoint {
         search::local_goal(&self.route, &self.cfg.planner, &self.wide(), s, obstacles)
     }
 
@@ -377,7 +377,12 @@ impl Navigator {
     /// static obstacle; at most `MAX_DETOURS`. The order is the stated cost, and the
     /// first with a feasible path wins: the least lateral shift, then the farther goal,
     /// then right before left.
-    pub fn detours(&self, s: f64, first: &RoutePoint, obstacles: &[Circle]) -> Vec<RoutePoint> {
+    pub fn detours(
+        &self,
+        s: f64,
+        first: &RoutePoint,
+        obstacles: &[planner::Obstacle],
+    ) -> Vec<RoutePoint> {
         search::detours(
             &self.route,
             &self.cfg.planner,
@@ -415,7 +420,7 @@ impl Navigator {
         &self,
         now: f64,
         pose: &Pose,
-        obstacles: &[Circle],
+        obstacles: &[planner::Obstacle],
         here: &RoutePoint,
         goal: &RoutePoint,
         r0: f64,
@@ -489,7 +494,7 @@ impl Navigator {
     /// The planning problem for a replanning from `pose` at `now`: towards the local
     /// goal, with the detours to try if it has no feasible path, and the same through
     /// passages narrower than the planning circle.
-    pub fn request(&self, now: f64, pose: &Pose, obstacles: &[Circle]) -> PlanRequest {
+    pub fn request(&self, now: f64, pose: &Pose, obstacles: &[planner::Obstacle]) -> PlanRequest {
         let s = self.progress_at(pose);
         let at = Replanning {
             now,
@@ -655,7 +660,13 @@ impl Navigator {
 
     /// The turn towards the line of a car at `pose` heading `theta` off it (more than
     /// the align threshold; none otherwise), at the steering `limit`.
-    fn align(&self, pose: &Pose, obstacles: &[Circle], theta: f64, limit: f64) -> Option<Align> {
+    fn align(
+        &self,
+        pose: &Pose,
+        obstacles: &[planner::Obstacle],
+        theta: f64,
+        limit: f64,
+    ) -> Option<Align> {
         let pc = &self.cfg.planner;
         let threshold = if self.aligning.is_some() {
             pc.align_exit_deg
@@ -682,7 +693,7 @@ impl Navigator {
         &self,
         now: f64,
         pose: &Pose,
-        obstacles: &[Circle],
+        obstacles: &[planner::Obstacle],
         s: f64,
         turning: bool,
     ) -> Option<manoeuvre::ManoeuvreRequest> {
@@ -748,7 +759,7 @@ impl Navigator {
         &self,
         s: f64,
         footprint: &Footprint,
-        obstacles: &[Circle],
+        obstacles: &[planner::Obstacle],
     ) -> Vec<manoeuvre::Goal> {
         let left = self.route.length() - s;
         let m = &self.cfg.mission;
@@ -763,7 +774,7 @@ impl Navigator {
                 tol_theta: std::f64::consts::PI,
             }];
         }
-        let statics: Vec<planner::Obstacle> = obstacles.iter().map(Into::into).collect();
+        let statics: Vec<planner::Obstacle> = obstacles.to_vec();
         let mut goals = Vec::new();
         for ahead in MANOEUVRE_AHEAD {
             for offset in MANOEUVRE_OFFSETS {
@@ -813,7 +824,7 @@ impl Navigator {
         &self,
         now: f64,
         pose: &Pose,
-        obstacles: &[Circle],
+        obstacles: &[planner::Obstacle],
         s: f64,
         problem: &PlanProblem,
     ) -> Vec<(PlanProblem, PathFrame)> {
@@ -865,7 +876,7 @@ impl Navigator {
     /// finds the edge of a gate it is driving through a few centimetres inside the
     /// margin (GPS noise moves the world round the car), then drives on along a path
     /// that holds, where it would otherwise stop at once.
-    fn current_path_holds(&self, pose: &Pose, obstacles: &[Circle]) -> bool {
+    fn current_path_holds(&self, pose: &Pose, obstacles: &[planner::Obstacle]) -> bool {
         let Some(t) = &self.active else {
             return false;
         };
@@ -892,7 +903,7 @@ impl Navigator {
         });
         if self.passage {
             let footprint = self.footprint();
-            let statics: Vec<planner::Obstacle> = obstacles.iter().map(Into::into).collect();
+            let statics: Vec<planner::Obstacle> = obstacles.to_vec();
             let clipped = footprint.clip_to_start(pose.x, pose.y, pose.theta, &statics);
             return rest.all(|(wx, wy, heading)| footprint.clear_at(wx, wy, heading, &clipped));
         }
@@ -1021,7 +1032,7 @@ impl Navigator {
     /// planning): begin a reversal when the car has stood with no feasible path for
     /// `recover_after_s` and reversals are left; while reversing, brake once the
     /// distance is covered or the rest is no longer clear, and replan once standing.
-    pub fn recover(&mut self, now: f64, pose: &Pose, obstacles: &[Circle]) {
+    pub fn recover(&mut self, now: f64, pose: &Pose, obstacles: &[planner::Obstacle]) {
         let pc = &self.cfg.planner;
         let r0 = self.cfg.vehicle.radius + pc.safety_margin;
         if let Some(r) = &mut self.reversing {
@@ -1381,8 +1392,8 @@ mod tests {
     }
 
     /// A static post.
-    fn post(x: f64, y: f64, radius: f64) -> Circle {
-        Circle {
+    fn post(x: f64, y: f64, radius: f64) -> planner::Obstacle {
+        planner::Obstacle {
             x,
             y,
             radius,
@@ -1401,7 +1412,7 @@ mod tests {
 
     /// A replanning from `pose` at 0.5 s allowed no steering and offered only the local
     /// goal: it finds no path, and what is kept is up to the path being followed.
-    fn starved(nav: &Navigator, pose: &Pose, obstacles: &[Circle]) -> PlanOutcome {
+    fn starved(nav: &Navigator, pose: &Pose, obstacles: &[planner::Obstacle]) -> PlanOutcome {
         let mut req = nav.request(0.5, pose, obstacles);
         req.steer_limit = 1e-6;
         req.detours.clear();
@@ -1411,7 +1422,11 @@ mod tests {
         solve(&req)
     }
 
-    fn replan_and_follow(nav: &mut Navigator, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+    fn replan_and_follow(
+        nav: &mut Navigator,
+        pose: &Pose,
+        obstacles: &[planner::Obstacle],
+    ) -> Guidance {
         assert!(nav.replan_due(0.0, pose));
         nav.issued(0.0);
         nav.accept(solve(&nav.request(0.0, pose, obstacles)));
@@ -1431,7 +1446,8 @@ mod tests {
         // On the path, 0.1 m off it: a replanning allowed no steering finds nothing.
         let pose = car_at(2.0, 0.1, 0.0, 2.0);
         nav.follow(&pose);
-        let starved = |nav: &Navigator, obstacles: &[Circle]| starved(nav, &pose, obstacles);
+        let starved =
+            |nav: &Navigator, obstacles: &[planner::Obstacle]| starved(nav, &pose, obstacles);
         let outcome = starved(&nav, &[post_beside]);
         let Ok((None, record)) = &outcome.result else {
             panic!("a path with no steering: {:?}", outcome.result);
@@ -1450,7 +1466,7 @@ mod tests {
         replan_and_follow(&mut nav, &start, &[post_beside]);
         let off = car_at(2.0, 0.6, 0.0, 2.0);
         assert!(!nav.current_path_holds(&off, &[post_beside]));
-        let walker = Circle {
+        let walker = planner::Obstacle {
             vx: 1.0,
             ..post(30.0, 20.0, 0.3)
         };
@@ -1463,7 +1479,7 @@ mod tests {
         let cfg = ControllerConfig::default();
         let mut nav = Navigator::new(&cfg).expect("navigator");
         let pose = car_at(0.0, 0.0, 45f64.to_radians(), 0.0);
-        let post = Circle {
+        let post = planner::Obstacle {
             x: 19.0,
             y: 8.0,
             radius: 3.0,
@@ -1499,7 +1515,7 @@ mod tests {
         let cfg = ControllerConfig::default();
         let mut nav = Navigator::new(&cfg).expect("navigator");
         let pose = car_at(0.0, 0.0, 0.4, 0.0);
-        let blocker = Circle {
+        let blocker = planner::Obstacle {
             x: 30.0,
             y: 15.0,
             radius: 1.0,
@@ -1541,7 +1557,7 @@ mod tests {
     fn an_oncoming_cart_on_the_line_is_given_way_to_on_the_right_without_stopping() {
         let mut cfg = east_to(50.0);
         let pose = car_at(0.0, 0.0, 0.0, 2.0);
-        let cart = Circle {
+        let cart = planner::Obstacle {
             vx: -1.5,
             ..post(16.0, 0.3, 1.3)
         };
@@ -1579,7 +1595,7 @@ mod tests {
         // it at its pace for the rest of the local horizon.
         let cfg = east_to(60.0);
         let pose = car_at(0.0, 0.0, 0.0, 2.0);
-        let cart = Circle {
+        let cart = planner::Obstacle {
             vx: 0.3,
             ..post(9.0, 0.0, 1.3)
         };
@@ -1603,14 +1619,14 @@ mod tests {
         // Two walkers side by side at 0.7 m/s, 6 m ahead: scored against following
         // them, no detour pays; the pass lane clears both and may take any pace.
         let walkers = |vy: f64| {
-            [(6.0, 0.3), (8.0, -0.5)].map(|(x, y)| Circle {
+            [(6.0, 0.3), (8.0, -0.5)].map(|(x, y)| planner::Obstacle {
                 vx: 0.7,
                 vy,
                 ..post(x, y, 0.3)
             })
         };
         let pose = car_at(0.0, 0.0, 0.0, 1.0);
-        let plan = |cfg: &ControllerConfig, obstacles: &[Circle]| {
+        let plan = |cfg: &ControllerConfig, obstacles: &[planner::Obstacle]| {
             let nav = Navigator::new(cfg).expect("navigator");
             let (trajectory, record) = solve(&nav.request(0.0, &pose, obstacles))
                 .result
@@ -1650,7 +1666,7 @@ mod tests {
         let mut nav = Navigator::new(&cfg).expect("navigator");
         let pose = car_at(8.0, 0.0, 0.0, 2.0);
         // At 2 m/s the car is at x = 16 in 4 s, when the obstacle crosses y = 0.
-        let crossing = Circle {
+        let crossing = planner::Obstacle {
             x: 16.0,
             y: -5.2,
             radius: 0.5,
@@ -1678,7 +1694,7 @@ mod tests {
         assert!(clearance > 0.0, "{clearance}");
         // The same obstacle taken as static at its position (the paper's planner)
         // gives no reason to slow down.
-        let still = Circle {
+        let still = planner::Obstacle {
             vy: 0.0,
             ..crossing
         };
@@ -1697,7 +1713,7 @@ mod tests {
     fn a_passage_path_is_kept_while_the_rectangle_clears_the_rest_of_it() {
         let cfg = east_to(30.0);
         // A fence across the route at x = 10 with a 2.0 m gate on the route.
-        let fence: Vec<Circle> = (0..16)
+        let fence: Vec<planner::Obstacle> = (0..16)
             .flat_map(|k| {
                 let y = 1.25 + 0.5 * f64::from(k);
                 [post(10.0, y, 0.25), post(10.0, -y, 0.25)]
@@ -1716,7 +1732,8 @@ mod tests {
         nav.follow(&pose);
         let mut edge = fence.clone();
         edge.push(post(10.0, 0.95, 0.15));
-        let starved = |nav: &Navigator, obstacles: &[Circle]| starved(nav, &pose, obstacles);
+        let starved =
+            |nav: &Navigator, obstacles: &[planner::Obstacle]| starved(nav, &pose, obstacles);
         let outcome = starved(&nav, &edge);
         assert!(
             matches!(&outcome.result, Ok((None, r)) if r.kept),
@@ -1738,7 +1755,7 @@ mod tests {
         let cfg = east_to(17.0);
         let nav = Navigator::new(&cfg).expect("navigator");
         let pose = car_at(0.0, 0.3, 0.0, 2.0);
-        let walker = |vx: f64, vy: f64| Circle {
+        let walker = |vx: f64, vy: f64| planner::Obstacle {
             x: -0.6,
             y: -3.6,
             radius: 0.5,
@@ -1746,7 +1763,7 @@ mod tests {
             vy,
         };
         // Only the local goal is offered (in the run its detours were refused too).
-        let request = |obstacles: &[Circle]| {
+        let request = |obstacles: &[planner::Obstacle]| {
             let mut req = nav.request(0.0, &pose, obstacles);
             req.detours.clear();
             req.passages.clear();
@@ -1775,7 +1792,7 @@ mod tests {
         // A walker crossing just ahead passes in front of where the car would stand:
         // standing is yielding, and no escape is planned (the circle-clear tiers slow
         // the car instead).
-        let ahead = Circle {
+        let ahead = planner::Obstacle {
             x: 6.0,
             y: -1.0,
             ..walker(0.0, 1.0)
@@ -1799,7 +1816,7 @@ mod tests {
         let cfg = east_to(50.0);
         let mut nav = Navigator::new(&cfg).expect("navigator");
         drive_east(&mut nav, 25);
-        let walker = |x: f64, y: f64, vx: f64, vy: f64| Circle {
+        let walker = |x: f64, y: f64, vx: f64, vy: f64| planner::Obstacle {
             x,
             y,
             radius: 0.3,
@@ -1883,7 +1900,7 @@ mod tests {
         // A post on the right turning circle: the long way round (left).
         let r = cfg.vehicle.wheelbase / limit.tan();
         let (cx, cy) = (r * pose.theta.sin(), -r * pose.theta.cos());
-        let post = Circle {
+        let post = planner::Obstacle {
             x: cx + r,
             y: cy,
             radius: 0.5,
@@ -1898,7 +1915,7 @@ mod tests {
         assert!(!blocked.clear(false, r0));
         assert_eq!(blocked.steer(r0, limit), Some(limit));
         // Posts on both circles: stop.
-        let other = Circle {
+        let other = planner::Obstacle {
             x: -r * pose.theta.sin() - r,
             y: r * pose.theta.cos(),
             ..post
@@ -1921,12 +1938,12 @@ mod tests {
 
     /// A mission east along y = 0 and a wall of posts across it at `wall_x`, from
     /// y = -25 to 25 (every 0.5 m): too long to go round.
-    fn dead_end(wall_x: f64) -> (ControllerConfig, Vec<Circle>) {
+    fn dead_end(wall_x: f64) -> (ControllerConfig, Vec<planner::Obstacle>) {
         let mut cfg = ControllerConfig::default();
         cfg.mission.goal_x = 30.0;
         cfg.mission.goal_y = 0.0;
         let wall = (-50..=50)
-            .map(|i| Circle {
+            .map(|i| planner::Obstacle {
                 x: wall_x,
                 y: f64::from(i) * 0.5,
                 radius: 0.3,
@@ -1945,7 +1962,12 @@ mod tests {
     }
 
     /// Replan at `now` from `pose` when due, recover, follow: as the controller's tick does.
-    fn tick(nav: &mut Navigator, now: f64, pose: &Pose, obstacles: &[Circle]) -> Guidance {
+    fn tick(
+        nav: &mut Navigator,
+        now: f64,
+        pose: &Pose,
+        obstacles: &[planner::Obstacle],
+    ) -> Guidance {
         if nav.replan_due(now, pose) {
             nav.issued(now);
             nav.accept(solve(&nav.request(now, pose, obstacles)));
@@ -2169,7 +2191,7 @@ mod tests {
         let req = nav.request(0.0, &at, &[]);
         assert!(req.problem.goal.theta.abs() <= MAX_LOCAL_HEADING + 1e-12);
         // A post on the local goal moves it on along the route, 5 m of approach clear.
-        let post = Circle {
+        let post = planner::Obstacle {
             x: 50.0,
             y: 10.0,
             radius: 0.5,
@@ -2189,7 +2211,7 @@ mod tests {
         let cfg = long_route();
         let nav = Navigator::new(&cfg).expect("navigator");
         let first = nav.local_goal(0.0, &[]);
-        let post = Circle {
+        let post = planner::Obstacle {
             x: 20.0,
             y: -1.5,
             radius: 0.5,
@@ -2215,7 +2237,7 @@ mod tests {
 
     /// A fence across the route at x = 20 with a gate `gap` wide centred on it, as
     /// perception covers it: chains of circles spaced for the passage margin.
-    fn fence(gap: f64, margin: f64) -> Vec<Circle> {
+    fn fence(gap: f64, margin: f64) -> Vec<planner::Obstacle> {
         let cfg = PerceptionConfig {
             vehicle_radius: margin,
             ..PerceptionConfig::default()
@@ -2227,7 +2249,7 @@ mod tests {
         .into_iter()
         .flat_map(|(a, b)| {
             let (r, centres) = cover_segment(a, b, 0.1, &cfg);
-            centres.into_iter().map(move |c| Circle {
+            centres.into_iter().map(move |c| planner::Obstacle {
                 x: c[0],
                 y: c[1],
                 radius: r,
@@ -2257,7 +2279,7 @@ mod tests {
         let fp = nav.footprint();
         let t = trajectory.expect("path");
         let p = t.path();
-        let obstacles: Vec<planner::Obstacle> = gate.iter().map(planner::Obstacle::from).collect();
+        let obstacles: Vec<planner::Obstacle> = gate.to_vec();
         for j in 0..=100 {
             let x = p.x_k() + p.span() * f64::from(j) / 100.0;
             let (wx, wy) = outcome.frame.to_world(x, p.y(x));

@@ -29,6 +29,11 @@
 //!
 //! # Pipeline of one scan ([`detect`], then [`Perception::update`])
 //!
+//! Each input is checked once. A scan where it enters: [`Scan::validate`] makes the
+//! [`ValidScan`] every step takes (the controller makes it from the laser frame,
+//! [`ValidScan::from_frame`]); the configuration when the [`Perception`] is built; the
+//! stamp's order, the mount and the pose at the update.
+//!
 //! 1. Clustering ([`cluster_points`]): consecutive hits belong to the same object when
 //!    their distance is below Borges and Aldon's adaptive breakpoint
 //!    `D = min(r_a, r_b) sin(dphi) / sin(lambda - dphi) + k sigma_r` (dphi the angle
@@ -97,7 +102,9 @@
 //!
 //! # What the planner gets
 //!
-//! Circles only ([`TrackedObstacle`], [`TrackedObstacle::to_planner`]). A wall segment
+//! Discs only: each [`TrackedObstacle`] holds the planner's own obstacle type
+//! ([`crate::planner::Obstacle`], its `disc`), which goes to guidance and the planner
+//! unchanged, with the tracker's diagnostics beside it. A wall segment
 //! becomes a chain of circles ([`cover_segment`]) of radius
 //! `r = max(wall_circle_min_radius, h + wall_circle_margin)`, h the wall's half
 //! thickness estimate (half the spread of the points across the fitted line), centred on
@@ -147,7 +154,7 @@ pub use detect::{
     cover_segment, detect,
 };
 pub use fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
-pub use frame::{Beam, Pose2, Scan, ScanPoint, scan_points};
+pub use frame::{Beam, Pose2, Scan, ScanPoint, ValidScan, scan_points};
 pub use seen::{CELL as SEEN_CELL, SeenSpace, SeenWindow, rectangle_seen};
 pub use track::{Perception, PerceptionOutput, TrackedObstacle, WallSegment};
 

@@ -28,7 +28,7 @@ use golf_car_can::{
 use serde::Serialize;
 use serde_json::json;
 
-use crate::control::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode, scan_of};
+use crate::control::{COMMAND_PERIOD, Controller, HEARTBEAT_PERIOD, Mode};
 use crate::record::{BackgroundWriter, RecordSummary, Writer, topics};
 use crate::trace::{FixTiming, Trace, TraceWriter};
 
@@ -484,7 +484,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
             self.stats.laser_frames_repeated += 1;
         } else {
             self.last_scan_id = Some(id);
-            self.ctl.on_scan(now, &scan_of(frame, now));
+            self.ctl.on_laser_frame(now, frame);
         }
     }
 

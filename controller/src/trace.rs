@@ -13,7 +13,8 @@ use std::io::Write;
 use serde::Serialize;
 
 use crate::control::{Controller, Mode, Sample};
-use crate::guidance::{Circle, PlanRecord};
+use crate::guidance::PlanRecord;
+use crate::planner::Obstacle;
 
 #[derive(Clone, Debug, Serialize, serde::Deserialize)]
 pub struct Trace {
@@ -23,7 +24,7 @@ pub struct Trace {
     pub tracking_error_rms: f64,
     pub samples: Vec<Sample>,
     pub plans: Vec<PlanRecord>,
-    pub obstacles: Vec<Circle>,
+    pub obstacles: Vec<Obstacle>,
     /// When each GPS fix came in and when the first steering command computed with it
     /// went out (the binary on the wires; empty in SIL).
     #[serde(default)]
@@ -72,7 +73,7 @@ fn csv_row(s: &Sample) -> String {
 pub struct StateRecord {
     pub t: f64,
     pub mode: Mode,
-    pub obstacles: Vec<Circle>,
+    pub obstacles: Vec<Obstacle>,
     #[serde(default)]
     pub stop_reason: Option<String>,
     #[serde(default)]

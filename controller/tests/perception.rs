@@ -11,7 +11,7 @@ mod perception {
     use proptest::prelude::*;
     use ugv_controller::perception::{
         ObstacleKind, Perception, PerceptionConfig, PerceptionError, PerceptionOutput, Pose2, Scan,
-        TrackedObstacle, cover_segment, detect, scan_points,
+        TrackedObstacle, ValidScan, cover_segment, detect, scan_points,
     };
 
     const SIGMA: f64 = 0.012;
@@ -96,7 +96,8 @@ mod perception {
     };
 
     impl Scanner {
-        fn scan<'a>(&self, stamp: f64, ranges: &'a [f32]) -> Scan<'a> {
+        #[allow(clippy::expect_used)]
+        fn scan<'a>(&self, stamp: f64, ranges: &'a [f32]) -> ValidScan<'a> {
             Scan {
                 stamp,
                 angle_min: self.angle_min,
@@ -105,6 +106,8 @@ mod perception {
                 range_max: self.range_max,
                 ranges,
             }
+            .validate()
+            .expect("a valid scan")
         }
 
         /// Ranges seen from the laser mounted at `mount` on the vehicle at `pose`.
@@ -187,10 +190,12 @@ mod perception {
             range_min: 0.1,
             range_max: 20.0,
             ranges: &ranges,
-        };
+        }
+        .validate()
+        .expect("valid scan");
         let mount = Pose2::new(1.5, 0.3, FRAC_PI_2);
         let pose = Pose2::new(5.0, -2.0, FRAC_PI_2);
-        let pts = scan_points(&scan, &mount, &pose).expect("valid scan");
+        let pts = scan_points(&scan, &mount, &pose).expect("finite mount and pose");
         assert_eq!(pts.len(), 2, "the inf and NaN beams give no point");
         let close = |a: [f64; 2], b: [f64; 2]| dist(a, b) < 1e-12;
         assert!(close(pts[0].laser, [2.0, 0.0]));
@@ -206,8 +211,10 @@ mod perception {
         let ranges = [2.0f32];
         let scan = Scan {
             ranges: &ranges,
-            ..scan
-        };
+            ..*scan
+        }
+        .validate()
+        .expect("valid scan");
         let pts = scan_points(
             &scan,
             &Pose2::new(1.0, 0.0, 30f64.to_radians()),
@@ -299,10 +306,17 @@ mod perception {
             assert_eq!(out.obstacles.len(), 1, "view {v}: {:?}", out.obstacles);
             let o = out.obstacles[0];
             assert_eq!(o.kind, ObstacleKind::Post);
-            assert!(dist([o.x, o.y], [19.0, 8.0]) < 0.15, "view {v}: {o:?}");
-            assert!((o.radius - 3.0).abs() < 0.15, "view {v}: {o:?}");
-            assert_eq!((o.vx, o.vy), (0.0, 0.0));
-            assert_eq!(o.to_planner().radius, o.radius);
+            assert!(
+                dist([o.disc.x, o.disc.y], [19.0, 8.0]) < 0.15,
+                "view {v}: {o:?}"
+            );
+            assert!((o.disc.radius - 3.0).abs() < 0.15, "view {v}: {o:?}");
+            assert_eq!((o.disc.vx, o.disc.vy), (0.0, 0.0));
+            assert_eq!(
+                out.planner_obstacles(),
+                vec![o.disc],
+                "the planner takes the disc"
+            );
         }
         eprintln!(
             "paper post, 5 views x 10 scans: worst centre error {worst_c:.4} m, worst radius error {worst_r:.4} m"
@@ -503,7 +517,7 @@ mod perception {
             assert!(
                 chain
                     .iter()
-                    .all(|c| c.id == s.id && c.vx == 0.0 && c.vy == 0.0)
+                    .all(|c| c.id == s.id && c.disc.vx == 0.0 && c.disc.vy == 0.0)
             );
             assert_eq!(out.obstacles.len(), chain.len());
             let (radius, centres) = cover_segment(s.p0, s.p1, s.half_thickness, &cfg);
@@ -523,7 +537,7 @@ mod perception {
                     ];
                     let covered = chain
                         .iter()
-                        .any(|c| dist([c.x, c.y], q) <= c.radius + r0 + 1e-9);
+                        .any(|c| dist([c.disc.x, c.disc.y], q) <= c.disc.radius + r0 + 1e-9);
                     assert!(covered, "r0 {r0}: {q:?} not covered");
                 }
             }
@@ -532,7 +546,7 @@ mod perception {
                 assert!(
                     chain
                         .iter()
-                        .any(|c| dist([c.x, c.y], pt.world) <= radius + 1e-9),
+                        .any(|c| dist([c.disc.x, c.disc.y], pt.world) <= radius + 1e-9),
                     "{pt:?}"
                 );
             }
@@ -580,7 +594,7 @@ mod perception {
             );
             let o = out.obstacles[0];
             ids.push(o.id);
-            let err = (o.vx - v_post[0]).hypot(o.vy - v_post[1]);
+            let err = (o.disc.vx - v_post[0]).hypot(o.disc.vy - v_post[1]);
             if k == 25 {
                 err_at_half_s = err;
             }
@@ -589,11 +603,14 @@ mod perception {
                 assert!(
                     err < 0.2,
                     "k {k}: velocity ({}, {}) error {err}",
-                    o.vx,
-                    o.vy
+                    o.disc.vx,
+                    o.disc.vy
                 );
-                assert!(dist([o.x, o.y], centre) < 0.1, "k {k}: {o:?} vs {centre:?}");
-                assert!((o.radius - 0.4).abs() < 0.1, "k {k}: {o:?}");
+                assert!(
+                    dist([o.disc.x, o.disc.y], centre) < 0.1,
+                    "k {k}: {o:?} vs {centre:?}"
+                );
+                assert!((o.disc.radius - 0.4).abs() < 0.1, "k {k}: {o:?}");
             }
         }
         ids.dedup();
@@ -625,11 +642,11 @@ mod perception {
             let Some(o) = out
                 .obstacles
                 .iter()
-                .find(|o| dist([o.x, o.y], centre) < 0.5)
+                .find(|o| dist([o.disc.x, o.disc.y], centre) < 0.5)
             else {
                 continue;
             };
-            let moving = o.vx != 0.0 || o.vy != 0.0;
+            let moving = o.disc.vx != 0.0 || o.disc.vy != 0.0;
             match first_moving {
                 None if moving => first_moving = Some(t),
                 Some(_) if !moving => static_after += 1,
@@ -680,9 +697,9 @@ mod perception {
                     for o in &pieces {
                         // Head on only the front face is seen: its normal speed is
                         // the whole velocity. Offset, the side adds nothing across.
-                        let err = (o.vx + 1.5).hypot(o.vy);
+                        let err = (o.disc.vx + 1.5).hypot(o.disc.vy);
                         worst = worst.max(err);
-                        assert!(err < 0.3, "{label} k {k}: ({}, {})", o.vx, o.vy);
+                        assert!(err < 0.3, "{label} k {k}: ({}, {})", o.disc.vx, o.disc.vy);
                     }
                 }
             }
@@ -725,7 +742,7 @@ mod perception {
             }
             for o in posts(&out.obstacles, ObstacleKind::Post) {
                 reports += 1;
-                if o.vx != 0.0 || o.vy != 0.0 {
+                if o.disc.vx != 0.0 || o.disc.vy != 0.0 {
                     reported_nonzero += 1;
                 }
                 if k >= 25 {
@@ -734,7 +751,7 @@ mod perception {
             }
             for o in posts(&out.obstacles, ObstacleKind::WallPiece) {
                 walls += 1;
-                assert_eq!((o.vx, o.vy), (0.0, 0.0), "k {k}: {o:?}");
+                assert_eq!((o.disc.vx, o.disc.vy), (0.0, 0.0), "k {k}: {o:?}");
             }
         }
         eprintln!(
@@ -761,7 +778,7 @@ mod perception {
                 r: 0.5,
             },
         ];
-        let near = |o: &TrackedObstacle| o.x.hypot(o.y) - o.radius;
+        let near = |o: &TrackedObstacle| o.disc.x.hypot(o.disc.y) - o.disc.radius;
         for (radius, expected) in [(8.0, 1), (12.5, 2), (5.0, 0)] {
             let cfg = PerceptionConfig {
                 detection_radius: radius,
@@ -903,7 +920,7 @@ mod perception {
                 let o = out
                     .obstacles
                     .iter()
-                    .find(|o| dist([o.x, o.y], post) < 0.5)
+                    .find(|o| dist([o.disc.x, o.disc.y], post) < 0.5)
                     .unwrap_or_else(|| panic!("k {k}: the post is lost: {:?}", out.obstacles));
                 last = Some(*o);
             }
@@ -911,10 +928,10 @@ mod perception {
         let o = last.expect("reported");
         eprintln!(
             "remembered post after 20 s out of sight: {:.3} m from where it is",
-            dist([o.x, o.y], post)
+            dist([o.disc.x, o.disc.y], post)
         );
-        assert!(dist([o.x, o.y], post) < 0.1, "{o:?}");
-        assert_eq!((o.vx, o.vy), (0.0, 0.0));
+        assert!(dist([o.disc.x, o.disc.y], post) < 0.1, "{o:?}");
+        assert_eq!((o.disc.vx, o.disc.vy), (0.0, 0.0));
     }
 
     #[test]
@@ -946,9 +963,9 @@ mod perception {
                 let seen = out
                     .obstacles
                     .iter()
-                    .find(|o| dist([o.x, o.y], walker) < 2.0 && o.vx > 0.3);
+                    .find(|o| dist([o.disc.x, o.disc.y], walker) < 2.0 && o.disc.vx > 0.3);
                 match (seen, out_of_view) {
-                    (Some(o), Some(_)) => worst = worst.max(dist([o.x, o.y], walker)),
+                    (Some(o), Some(_)) => worst = worst.max(dist([o.disc.x, o.disc.y], walker)),
                     (None, Some(_)) => {
                         gone.get_or_insert(t);
                     }
@@ -1006,7 +1023,7 @@ mod perception {
             // Its pieces out to the detection radius go to the planner, behind too.
             let laser_x = pose.x + mount.x;
             assert!(
-                out.obstacles.iter().any(|o| o.x < laser_x - 4.0) || laser_x < 5.0,
+                out.obstacles.iter().any(|o| o.disc.x < laser_x - 4.0) || laser_x < 5.0,
                 "k {k}: nothing behind the laser: {:?}",
                 out.obstacles
             );
@@ -1035,8 +1052,12 @@ mod perception {
             let t = k as f64 / RATE;
             let pose = Pose2::new(2.0 + 1.0 * t, 0.05, 0.0);
             let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
-            for o in out.obstacles.iter().filter(|o| (o.x - 20.0).abs() < 1.0) {
-                let open = o.y.abs() - o.radius;
+            for o in out
+                .obstacles
+                .iter()
+                .filter(|o| (o.disc.x - 20.0).abs() < 1.0)
+            {
+                let open = o.disc.y.abs() - o.disc.radius;
                 worst = worst.min(open);
                 assert!(open > 0.8, "k {k}: {o:?} reaches into the gate");
             }
@@ -1070,8 +1091,8 @@ mod perception {
                 let t = k as f64 / RATE;
                 let pose = Pose2::new(2.0 * t - 4.0, 0.02 * (seed as f64 - 4.0), 0.0);
                 let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
-                for o in out.obstacles.iter().filter(|o| o.x > 14.0) {
-                    let open = o.y.abs() - o.radius;
+                for o in out.obstacles.iter().filter(|o| o.disc.x > 14.0) {
+                    let open = o.disc.y.abs() - o.disc.radius;
                     worst = worst.min(open);
                     assert!(open > 0.95, "seed {seed} k {k}: {o:?} reaches into the gap");
                 }
@@ -1114,7 +1135,12 @@ mod perception {
             let out = step(&mut p, &away, &empty);
             assert_eq!(out.obstacles.len(), 1, "remembered");
             assert_eq!(out.obstacles[0].misses, 0);
-            assert!(dist([out.obstacles[0].x, out.obstacles[0].y], [6.0, 0.0]) < 0.1);
+            assert!(
+                dist(
+                    [out.obstacles[0].disc.x, out.obstacles[0].disc.y],
+                    [6.0, 0.0]
+                ) < 0.1
+            );
         }
         // In view again with nothing there: it was moved, so it is missed and deleted.
         let mut gone = false;
@@ -1145,7 +1171,7 @@ mod perception {
             assert!(
                 out.obstacles
                     .iter()
-                    .any(|o| dist([o.x, o.y], [6.0, 0.0]) < 0.1 && o.misses == 0),
+                    .any(|o| dist([o.disc.x, o.disc.y], [6.0, 0.0]) < 0.1 && o.misses == 0),
                 "the hidden post is kept"
             );
         }
@@ -1208,12 +1234,19 @@ mod perception {
         p.update(&good, &mount, &pose).expect("first");
         let e = p.update(&good, &mount, &pose).expect_err("same stamp");
         assert!(matches!(e, PerceptionError::StampNotIncreasing { .. }));
-        let earlier = Scan { stamp: 0.5, ..good };
+        let earlier = Scan {
+            stamp: 0.5,
+            ..*good
+        }
+        .validate()
+        .expect("valid");
         assert!(p.update(&earlier, &mount, &pose).is_err());
         let later = Scan {
             stamp: 1.02,
-            ..good
-        };
+            ..*good
+        }
+        .validate()
+        .expect("valid");
         assert!(p.update(&later, &mount, &pose).is_ok());
 
         // Configuration.
@@ -1254,8 +1287,12 @@ mod perception {
         let pose = Pose2::new(0.0, 0.0, 0.0);
         let ranges = vec![5.0f32; 541];
         let good = LMS111.scan(1.0, &ranges);
+        // Refused where it is checked, once: before perception takes it.
         let check = |scan: Scan<'_>, what: &str| {
-            let err = detect(&scan, &mount, &pose, &cfg).expect_err(what);
+            let err = scan
+                .validate()
+                .and_then(|scan| detect(&scan, &mount, &pose, &cfg))
+                .expect_err(what);
             eprintln!("{what}: {err}");
             err
         };
@@ -1263,7 +1300,7 @@ mod perception {
             let e = check(
                 Scan {
                     angle_increment: bad,
-                    ..good
+                    ..*good
                 },
                 "non-finite angle_increment",
             );
@@ -1279,7 +1316,7 @@ mod perception {
             check(
                 Scan {
                     angle_increment: 0.0,
-                    ..good
+                    ..*good
                 },
                 "zero increment"
             ),
@@ -1289,7 +1326,7 @@ mod perception {
             check(
                 Scan {
                     angle_min: f64::NAN,
-                    ..good
+                    ..*good
                 },
                 "NaN angle_min"
             ),
@@ -1302,7 +1339,7 @@ mod perception {
             check(
                 Scan {
                     stamp: f64::NAN,
-                    ..good
+                    ..*good
                 },
                 "NaN stamp"
             ),
@@ -1319,8 +1356,12 @@ mod perception {
         let pose = Pose2::new(0.0, 0.0, 0.0);
         let ranges = vec![5.0f32; 541];
         let good = LMS111.scan(1.0, &ranges);
+        // Refused where it is checked, once: before perception takes it.
         let check = |scan: Scan<'_>, what: &str| {
-            let err = detect(&scan, &mount, &pose, &cfg).expect_err(what);
+            let err = scan
+                .validate()
+                .and_then(|scan| detect(&scan, &mount, &pose, &cfg))
+                .expect_err(what);
             eprintln!("{what}: {err}");
             err
         };
@@ -1329,7 +1370,7 @@ mod perception {
                 Scan {
                     range_min: 5.0,
                     range_max: 1.0,
-                    ..good
+                    ..*good
                 },
                 "range limits"
             ),
@@ -1339,7 +1380,7 @@ mod perception {
             check(
                 Scan {
                     range_min: -1.0,
-                    ..good
+                    ..*good
                 },
                 "negative range_min"
             ),
@@ -1351,7 +1392,7 @@ mod perception {
             check(
                 Scan {
                     ranges: &long,
-                    ..good
+                    ..*good
                 },
                 "ranges vs increment"
             ),
@@ -1359,18 +1400,13 @@ mod perception {
         ));
         // A full revolution is fine: 720 beams of 0.5 degrees.
         let full = vec![5.0f32; 720];
-        assert!(
-            detect(
-                &Scan {
-                    ranges: &full,
-                    ..good
-                },
-                &mount,
-                &pose,
-                &cfg
-            )
-            .is_ok()
-        );
+        let full = Scan {
+            ranges: &full,
+            ..*good
+        }
+        .validate()
+        .expect("a full revolution");
+        assert!(detect(&full, &mount, &pose, &cfg).is_ok());
     }
 
     #[test]
@@ -1420,7 +1456,7 @@ mod perception {
         let out = last.expect("scans");
         assert_eq!(out.obstacles.len(), 1, "{:?}", out.obstacles);
         let o = out.obstacles[0];
-        assert!(o.x > 8.0 && (o.vx + 0.8).abs() < 0.2, "{o:?}");
+        assert!(o.disc.x > 8.0 && (o.disc.vx + 0.8).abs() < 0.2, "{o:?}");
         assert_eq!(p.all_tracks().len(), 2);
         // With the moving radius at the static one, neither is reported.
         let mut narrow = Perception::new(PerceptionConfig {
@@ -1471,7 +1507,7 @@ mod perception {
                 .update(&LMS111.scan(t, &ranges), &mount, &believed)
                 .expect("valid");
             for o in &out.obstacles {
-                if o.vx != 0.0 || o.vy != 0.0 {
+                if o.disc.vx != 0.0 || o.disc.vy != 0.0 {
                     nonzero += 1;
                 }
             }
@@ -1557,8 +1593,12 @@ mod perception {
             });
             world.extend(box_sides(cart(t), 1.2, 2.4));
             let out = LMS111.track(&mut p, &world, &pose, &mount, t, &mut rng);
-            let near = |o: &TrackedObstacle, c: [f64; 2]| dist([o.x, o.y], c) < 1.5;
-            for o in out.obstacles.iter().filter(|o| o.vx != 0.0 || o.vy != 0.0) {
+            let near = |o: &TrackedObstacle, c: [f64; 2]| dist([o.disc.x, o.disc.y], c) < 1.5;
+            for o in out
+                .obstacles
+                .iter()
+                .filter(|o| o.disc.vx != 0.0 || o.disc.vy != 0.0)
+            {
                 if !near(o, walker(t)) && !near(o, cart(t)) {
                     phantoms += 1;
                     eprintln!("t {t:.2}: static obstacle reported moving: {o:?}");
@@ -1571,7 +1611,7 @@ mod perception {
             let moving = |c: [f64; 2], v: [f64; 2]| {
                 out.obstacles
                     .iter()
-                    .any(|o| near(o, c) && (o.vx - v[0]).hypot(o.vy - v[1]) < 0.3)
+                    .any(|o| near(o, c) && (o.disc.vx - v[0]).hypot(o.disc.vy - v[1]) < 0.3)
             };
             walker_moving += usize::from(moving(walker(t), [0.0, 0.5]));
             cart_moving += usize::from(moving(cart(t), [0.0, 1.3]));

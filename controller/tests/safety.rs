@@ -9,6 +9,7 @@
 
 use firmware_bridge::Received;
 use firmware_bridge::geodesy::{Enu, LocalFrame, theta_to_course_deg};
+use firmware_bridge::laser::LaserFrame;
 use firmware_bridge::nmea::{FixQuality, GpsReading};
 use golf_car_can::{
     ControllerHeartbeatState, FaultReportCode, GolfCarMessage, SteeringReport, SteeringReportFault,
@@ -16,7 +17,6 @@ use golf_car_can::{
 };
 use ugv_controller::config::ControllerConfig;
 use ugv_controller::control::{Controller, Mode};
-use ugv_controller::perception::Scan;
 
 struct Rig {
     cfg: ControllerConfig,
@@ -110,19 +110,20 @@ impl Rig {
                 self.ctl.on_gps(now, &reading);
             }
             if feed.laser && k.is_multiple_of(2) {
-                let scan = Scan {
-                    stamp: now,
-                    angle_min: -135f64.to_radians(),
+                // As the loop hands them over: the frame, checked as a scan once there.
+                let mut frame = LaserFrame {
+                    angle_min: -135f32.to_radians(),
                     angle_increment: if feed.refused_scans {
-                        f64::NAN
+                        f32::NAN
                     } else {
-                        0.5f64.to_radians()
+                        0.5f32.to_radians()
                     },
                     range_min: 0.5,
                     range_max: 20.0,
-                    ranges: &self.ranges,
+                    ..LaserFrame::default()
                 };
-                self.ctl.on_scan(now, &scan);
+                frame.set_beams(&self.ranges, &[]).expect("541 beams");
+                self.ctl.on_laser_frame(now, &frame);
             }
             let msgs = self.ctl.tick(now);
             self.out.extend(msgs);

@@ -1,10 +1,9 @@
 //! Laser frames from shared memory: `LaserSubscriber::try_recv` copies the `repr(C)`
 //! frame out of the sample and calls `LaserFrame::validate`; the controller then reads
-//! it through `control::scan_of` into perception.
+//! it as a scan, checked once (`ValidScan::from_frame`), into perception.
 
 use firmware_bridge::laser::{LASER_FRAME_VERSION, LaserFrame, MAX_BEAMS};
-use ugv_controller::control::scan_of;
-use ugv_controller::perception::{Perception, PerceptionConfig, Pose2};
+use ugv_controller::perception::{Perception, PerceptionConfig, Pose2, ValidScan};
 
 /// Bytes of the `repr(C)` frame: version, count (u32), sequence, stamp_ns (u64), six
 /// f32 fields, then the ranges and the intensities.
@@ -53,9 +52,9 @@ pub fn frame_of_bytes(data: &[u8]) -> LaserFrame {
 /// Invariants of a frame that validates: the version is this build's, 1 to
 /// [`MAX_BEAMS`] beams; its beams split into measurements, no-returns and dropouts
 /// (`summary`); every measurement (`valid_beams`) is finite, within the range limits
-/// and has a finite angle; `bit_eq` holds with itself; perception (`Perception::update`
-/// through `scan_of`, as `Controller::on_scan` does) takes it or refuses it with an
-/// error.
+/// and has a finite angle; `bit_eq` holds with itself; perception
+/// (`ValidScan::from_frame`, then `Perception::update`, as
+/// `Controller::on_laser_frame` does) takes it or refuses it with an error.
 pub fn laser_frame(data: &[u8]) {
     let frame = frame_of_bytes(data);
     if frame.validate().is_err() {
@@ -87,9 +86,11 @@ pub fn laser_frame(data: &[u8]) {
     };
     let mount = Pose2::new(1.2, 0.0, 0.0);
     let pose = Pose2::new(5.0, 3.0, 0.7);
-    let scan = scan_of(&frame, 1.0);
+    let Ok(scan) = ValidScan::from_frame(&frame, 1.0) else {
+        return;
+    };
     if let Ok(out) = perception.update(&scan, &mount, &pose) {
-        for o in &out.obstacles {
+        for o in out.obstacles.iter().map(|o| &o.disc) {
             assert!(
                 o.x.is_finite() && o.y.is_finite() && o.radius.is_finite(),
                 "perception reported a non-finite obstacle {o:?}"

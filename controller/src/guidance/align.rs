@@ -1,7 +1,7 @@
 //! Headings the polynomial cannot start from: turning towards the goal on the planned
 //! steering limit first, when a whole turning circle is clear ([`Align`]).
 
-use super::frame::Circle;
+use crate::planner::Obstacle;
 
 /// A car's nearest thing to turning on the spot: full planned lock at low speed, until
 /// the heading is within reach of a y(x) path. Taken only when the whole turning
@@ -17,7 +17,7 @@ pub struct Align {
     /// Turning radius of the rear axle at the planned steering limit, metres.
     pub turn_radius: f64,
     /// Obstacles in the world frame.
-    pub obstacles: Vec<Circle>,
+    pub obstacles: Vec<Obstacle>,
 }
 
 impl Align {

@@ -1,30 +1,10 @@
-//! The frames guidance works in: obstacles in the world frame ([`Circle`]), the
-//! planning frame whose origin is on the route and whose x axis points at the local
-//! goal ([`PathFrame`]), angles wrapped into (-pi, pi], and a static obstacle's radius
-//! clipped to just clear of where the car starts in that frame.
+//! The frames guidance works in: obstacles in the world frame (perception's discs, the
+//! planner's [`Obstacle`]), the planning frame whose origin is on the route and whose
+//! x axis points at the local goal ([`PathFrame`]), angles wrapped into (-pi, pi], and
+//! a static obstacle's radius clipped to just clear of where the car starts in that
+//! frame.
 
-/// An obstacle for the planner, in the world frame.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Circle {
-    pub x: f64,
-    pub y: f64,
-    pub radius: f64,
-    pub vx: f64,
-    pub vy: f64,
-}
-
-impl From<&Circle> for crate::planner::Obstacle {
-    /// The same disc, world frame kept.
-    fn from(c: &Circle) -> Self {
-        crate::planner::Obstacle {
-            x: c.x,
-            y: c.y,
-            radius: c.radius,
-            vx: c.vx,
-            vy: c.vy,
-        }
-    }
-}
+use crate::planner::Obstacle;
 
 /// A planning frame: origin on the route, x towards the local goal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +63,13 @@ pub(super) fn clip_to_start(radius: f64, x: f64, y: f64, px: f64, py: f64, r0: f
 /// with its radius clipped to just clear of `from` (where the car starts, as planned:
 /// [`clip_to_start`]), so an obstacle the car already stands within the margin of may
 /// come no closer.
-pub(super) fn clear_at(px: f64, py: f64, obstacles: &[Circle], from: (f64, f64), r0: f64) -> bool {
+pub(super) fn clear_at(
+    px: f64,
+    py: f64,
+    obstacles: &[Obstacle],
+    from: (f64, f64),
+    r0: f64,
+) -> bool {
     obstacles.iter().all(|o| {
         let radius = clip_to_start(o.radius, o.x, o.y, from.0, from.1, r0);
         (px - o.x).hypot(py - o.y) > radius + r0

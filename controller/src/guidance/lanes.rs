@@ -5,7 +5,6 @@
 //! traffic ([`clear_to_reverse`]).
 
 use super::footprint::Footprint;
-use super::frame::Circle;
 use crate::planner::{Obstacle, Trajectory, VehicleState};
 
 /// Slower than this, an obstacle is no traffic, m/s.
@@ -191,7 +190,7 @@ const REVERSE_TRACK_SAMPLES: u32 = 100;
 pub fn clear_to_reverse(
     points: &[(f64, f64)],
     duration_s: f64,
-    obstacles: &[Circle],
+    obstacles: &[Obstacle],
     r0: f64,
 ) -> bool {
     let watch = duration_s.max(0.0) + REVERSE_WATCH_S;
@@ -305,14 +304,14 @@ mod tests {
     #[test]
     fn a_reversal_waits_for_traffic_behind_or_on_its_way() {
         let back: Vec<(f64, f64)> = (0..=8).map(|i| (-0.5 * f64::from(i), 0.0)).collect();
-        let post = Circle {
+        let post = Obstacle {
             x: 6.0,
             y: 0.0,
             radius: 0.5,
             vx: 0.0,
             vy: 0.0,
         };
-        let cart = |x: f64, y: f64, vx: f64| Circle {
+        let cart = |x: f64, y: f64, vx: f64| Obstacle {
             x,
             y,
             radius: 0.5,

@@ -22,8 +22,8 @@ pub use hybrid::{Failure, Goal, Settings};
 pub use path::{Manoeuvre, PathPoint};
 
 use super::footprint::Footprint;
-use super::frame::Circle;
 use crate::perception::{SeenSpace, SeenWindow};
+use crate::planner::Obstacle;
 
 /// An obstacle within the margin of the car where it stands is shrunk to this much
 /// clear of it, metres.
@@ -67,7 +67,7 @@ pub struct ManoeuvreRequest {
     pub start: [f64; 3],
     /// Goals to try, in order ([`GOALS_SEARCHED`] of them at most).
     pub goals: Vec<Goal>,
-    pub obstacles: Vec<Circle>,
+    pub obstacles: Vec<Obstacle>,
     pub footprint: Footprint,
     pub settings: Settings,
     /// The manoeuvre being followed, from the pose it has reached: kept while the
@@ -92,7 +92,7 @@ pub struct ManoeuvreRequest {
 
 /// The obstacles as discs: static ones as they are, moving ones swept along their
 /// velocity over [`SWEEP_S`] (never back into one's way, nor in front of it).
-pub fn discs(obstacles: &[Circle]) -> Vec<Disc> {
+pub fn discs(obstacles: &[Obstacle]) -> Vec<Disc> {
     let mut out = Vec::with_capacity(obstacles.len());
     for o in obstacles {
         let speed = o.vx.hypot(o.vy);

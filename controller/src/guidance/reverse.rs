@@ -2,8 +2,9 @@
 //! short way along an arc checked against the obstacles it knows of ([`Reverse`]),
 //! then replans.
 
-use super::frame::{Circle, clear_at, wrap};
+use super::frame::{clear_at, wrap};
 use super::lanes;
+use crate::planner::Obstacle;
 
 /// Points checked per metre of a reverse path.
 const CHECKS_PER_M: f64 = 5.0;
@@ -41,7 +42,7 @@ impl Reverse {
         distance: f64,
         wheelbase: f64,
         steer_limit: f64,
-        obstacles: &[Circle],
+        obstacles: &[Obstacle],
         r0: f64,
     ) -> Option<Reverse> {
         // Backing on a left lock turns the nose right (clockwise).
@@ -92,7 +93,7 @@ impl Reverse {
     /// to just clear of where the car starts, so an obstacle the car already stands
     /// within the margin of (the one ahead it backs away from) may not come closer.
     /// Moving obstacles count where they are now.
-    pub fn clear(&self, obstacles: &[Circle], r0: f64) -> bool {
+    pub fn clear(&self, obstacles: &[Obstacle], r0: f64) -> bool {
         let n = (self.distance * CHECKS_PER_M).ceil().max(1.0) as usize;
         (1..=n).all(|j| {
             let (px, py, _) = self.pose_at(self.distance * j as f64 / n as f64);
@@ -103,7 +104,7 @@ impl Reverse {
     /// Whether the way back, driven at `speed` (m/s), is clear of traffic: no moving
     /// obstacle is within `r0` of the rear axle's path, or comes there while the car
     /// backs or soon after ([`lanes::clear_to_reverse`]).
-    pub fn clear_of_traffic(&self, obstacles: &[Circle], r0: f64, speed: f64) -> bool {
+    pub fn clear_of_traffic(&self, obstacles: &[Obstacle], r0: f64, speed: f64) -> bool {
         let n = (self.distance * CHECKS_PER_M).ceil().max(1.0) as usize;
         let points: Vec<(f64, f64)> = (0..=n)
             .map(|j| {
@@ -149,8 +150,8 @@ impl Reverse {
 mod tests {
     use super::*;
 
-    fn post(x: f64, y: f64) -> Circle {
-        Circle {
+    fn post(x: f64, y: f64) -> Obstacle {
+        Obstacle {
             x,
             y,
             radius: 0.5,
@@ -219,7 +220,7 @@ mod tests {
         .expect("an arc");
         assert!((r.steer - GENTLE * limit).abs() < 1e-12, "{r:?}");
         // Posts behind and on both sides behind: no way back.
-        let wall: Vec<Circle> = (-8..=8)
+        let wall: Vec<Obstacle> = (-8..=8)
             .map(|i| post(-4.5, f64::from(i) * 0.5))
             .chain([ahead])
             .collect();

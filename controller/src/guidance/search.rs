@@ -5,7 +5,6 @@
 //! by their stated cost.
 
 use super::footprint::Footprint;
-use super::frame::Circle;
 use crate::config::PlannerConfig;
 use crate::planner::Obstacle;
 use crate::route::{Route, RoutePoint};
@@ -18,7 +17,7 @@ const DETOUR_SHIFTS: [f64; 7] = [0.0, -1.5, 1.5, -3.0, 3.0, -4.5, 4.5];
 pub(super) const MAX_DETOURS: usize = 8;
 
 /// Whether `p` lies outside every static obstacle grown by `r0`.
-pub(super) fn clear_of(p: &RoutePoint, obstacles: &[Circle], r0: f64) -> bool {
+pub(super) fn clear_of(p: &RoutePoint, obstacles: &[Obstacle], r0: f64) -> bool {
     obstacles
         .iter()
         .filter(|o| o.vx == 0.0 && o.vy == 0.0)
@@ -45,12 +44,11 @@ impl Clearance {
     }
 
     /// Whether the car at `g` clears every static obstacle.
-    fn goal_clear(&self, g: &RoutePoint, obstacles: &[Circle]) -> bool {
+    fn goal_clear(&self, g: &RoutePoint, obstacles: &[Obstacle]) -> bool {
         clear_of(g, obstacles, self.r0)
-            && self.footprint.is_none_or(|f| {
-                let discs: Vec<Obstacle> = obstacles.iter().map(Obstacle::from).collect();
-                f.clear_at(g.x, g.y, g.heading, &discs)
-            })
+            && self
+                .footprint
+                .is_none_or(|f| f.clear_at(g.x, g.y, g.heading, obstacles))
     }
 }
 
@@ -72,7 +70,7 @@ pub(super) fn local_goal(
     pc: &PlannerConfig,
     clearance: &Clearance,
     s: f64,
-    obstacles: &[Circle],
+    obstacles: &[Obstacle],
 ) -> RoutePoint {
     let end = route.length();
     let nominal = (s + pc.horizon_m).min(end);
@@ -113,7 +111,7 @@ pub(super) fn pass_goals(
     s: f64,
     first: &RoutePoint,
     lane: f64,
-    obstacles: &[Circle],
+    obstacles: &[Obstacle],
 ) -> Vec<RoutePoint> {
     let half = route.at(s + (first.s - s) / 2.0);
     [*first, half]
@@ -145,7 +143,7 @@ pub(super) fn yield_goals(
     s: f64,
     run: f64,
     side: f64,
-    obstacles: &[Circle],
+    obstacles: &[Obstacle],
 ) -> Option<(f64, Vec<RoutePoint>)> {
     let along = |j: u32| route.at((s + run * f64::from(j) / 4.0).min(route.length()));
     let steps = (YIELD_MAX_SHIFT / YIELD_STEP).round() as usize;
@@ -178,7 +176,7 @@ pub(super) fn detours(
     clearance: &Clearance,
     s: f64,
     first: &RoutePoint,
-    obstacles: &[Circle],
+    obstacles: &[Obstacle],
 ) -> Vec<RoutePoint> {
     let half = route.at(s + (first.s - s) / 2.0);
     let mut tries: Vec<(f64, RoutePoint)> = Vec::new();

@@ -2,6 +2,7 @@
 //! right (a hedge on the right), and a cart overtaking the car.
 
 use super::*;
+use crate::planner::Obstacle;
 
 /// The default configuration with the goal at (goal_x, 0): a straight mission east.
 fn east_to(goal_x: f64) -> ControllerConfig {
@@ -31,8 +32,8 @@ fn navigator_at(cfg: &ControllerConfig, to: i32) -> Navigator {
     nav
 }
 
-fn circle(x: f64, y: f64, radius: f64, vx: f64) -> Circle {
-    Circle {
+fn circle(x: f64, y: f64, radius: f64, vx: f64) -> Obstacle {
+    Obstacle {
         x,
         y,
         radius,
@@ -43,7 +44,7 @@ fn circle(x: f64, y: f64, radius: f64, vx: f64) -> Circle {
 
 /// A hedge 2.9 m right of the route (its face at 2.6 m), as perception reports it:
 /// circles of 0.25 m every 0.8 m, within 8 m of (x, 0).
-fn hedge_near(x: f64) -> Vec<Circle> {
+fn hedge_near(x: f64) -> Vec<Obstacle> {
     (0..60)
         .map(|k| 6.0 + 0.8 * f64::from(k))
         .filter(|hx| (hx - x).abs() < 8.0)
@@ -53,14 +54,14 @@ fn hedge_near(x: f64) -> Vec<Circle> {
 
 /// The near side of a cart (2.4 m long) at `x`, 1.45 m left of the route, coming
 /// the other way at 1.5 m/s: its face 0.85 m left of the route, as circles.
-fn oncoming_cart(x: f64) -> Vec<Circle> {
+fn oncoming_cart(x: f64) -> Vec<Obstacle> {
     (0..4)
         .map(|k| circle(x - 1.2 + 0.8 * f64::from(k), 0.85, 0.25, -1.5))
         .collect()
 }
 
 /// One replanning from `pose` among `obstacles` at 0 s.
-fn plan(nav: &Navigator, pose: &Pose, obstacles: &[Circle]) -> (Option<Trajectory>, PlanRecord) {
+fn plan(nav: &Navigator, pose: &Pose, obstacles: &[Obstacle]) -> (Option<Trajectory>, PlanRecord) {
     solve(&nav.request(0.0, pose, obstacles))
         .result
         .expect("planned")
@@ -91,7 +92,7 @@ fn with_no_room_to_keep_right_the_car_pulls_over_and_never_plans_into_the_oncomi
 
 /// The near side of a cart (2.4 m long) centred at `x`, 2.3 m left of the route, going
 /// the car's way at 3.5 m/s: its face 1.7 m left of the route, as circles.
-fn overtaking_cart(x: f64) -> Vec<Circle> {
+fn overtaking_cart(x: f64) -> Vec<Obstacle> {
     (0..4)
         .map(|k| circle(x - 1.2 + 0.8 * f64::from(k), 1.7, 0.25, 3.5))
         .collect()
@@ -120,9 +121,9 @@ fn a_car_overtaken_on_its_left_holds_its_line_and_speed() {
     }
     // The same cart at the car's speed is planned round as before: the car may not
     // stay beside it (its circle overlaps the planning circle all along).
-    let abreast: Vec<Circle> = overtaking_cart(13.0)
+    let abreast: Vec<Obstacle> = overtaking_cart(13.0)
         .into_iter()
-        .map(|c| Circle { vx: 2.0, ..c })
+        .map(|c| Obstacle { vx: 2.0, ..c })
         .collect();
     let (_, record) = plan(&nav, &pose, &abreast);
     assert!(
@@ -138,7 +139,7 @@ fn a_car_with_no_way_forward_does_not_back_into_traffic_beside_or_behind_it() {
     // car stands.
     let post = circle(14.5, 0.0, 0.5, 0.0);
     let standing = car_at(10.0, 0.0, 0.0);
-    let stuck = |obstacles: &[Circle]| {
+    let stuck = |obstacles: &[Obstacle]| {
         let mut nav = navigator_at(&cfg, 10);
         let mut req = nav.request(0.0, &standing, obstacles);
         req.steer_limit = 1e-6;

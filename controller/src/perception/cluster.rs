@@ -97,7 +97,7 @@ mod tests {
         ];
         let s = scan(&ranges);
         let p = Pose2::new(0.0, 0.0, 0.0);
-        let pts = scan_points(&s, &p, &p).expect("valid");
+        let pts = scan_points(&s.validate().expect("valid"), &p, &p).expect("finite");
         let c = cluster_points(&s, &pts, &cfg);
         assert_eq!(c, vec![0..3, 3..6, 6..10]);
     }

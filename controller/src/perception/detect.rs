@@ -9,7 +9,7 @@ use super::PerceptionError;
 use super::cluster::cluster_points;
 use super::config::PerceptionConfig;
 use super::fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
-use super::frame::{Pose2, Scan, ScanPoint, scan_points};
+use super::frame::{Pose2, ScanPoint, ValidScan, scan_points};
 
 /// What an obstacle is taken for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -248,14 +248,26 @@ pub(super) fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 /// Detects the obstacles of one scan (no tracking): transformation, clustering and
-/// shape classification (see the module documentation).
+/// shape classification (see the module documentation). `cfg` is checked first; a
+/// [`super::Perception`], whose configuration was checked when it was built, detects
+/// without checking it again ([`detect_with`]).
 pub fn detect(
-    scan: &Scan<'_>,
+    scan: &ValidScan<'_>,
     mount: &Pose2,
     pose: &Pose2,
     cfg: &PerceptionConfig,
 ) -> Result<Detections, PerceptionError> {
     cfg.validate()?;
+    detect_with(scan, mount, pose, cfg)
+}
+
+/// [`detect`] with a configuration already checked.
+pub(super) fn detect_with(
+    scan: &ValidScan<'_>,
+    mount: &Pose2,
+    pose: &Pose2,
+    cfg: &PerceptionConfig,
+) -> Result<Detections, PerceptionError> {
     let points = scan_points(scan, mount, pose)?;
     let clusters = cluster_points(scan, &points, cfg);
     let laser = pose.compose(mount);

@@ -1,7 +1,9 @@
 //! Scans, poses and the laser -> vehicle -> world transformation.
 
 use std::f64::consts::TAU;
+use std::ops::Deref;
 
+use firmware_bridge::laser::LaserFrame;
 use nalgebra::{Isometry2, Point2, Vector2};
 use serde::{Deserialize, Serialize};
 
@@ -57,7 +59,8 @@ impl Pose2 {
     }
 }
 
-/// One sweep of the scanner (ROS LaserScan semantics, without intensities).
+/// One sweep of the scanner (ROS LaserScan semantics, without intensities), as given:
+/// [`Scan::validate`] makes it the [`ValidScan`] perception takes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Scan<'a> {
     /// Acquisition time, seconds.
@@ -84,9 +87,40 @@ pub enum Beam {
     Dropout,
 }
 
-impl Scan<'_> {
-    /// Checks the scan's header against its ranges.
-    pub fn validate(&self) -> Result<(), PerceptionError> {
+/// A scan whose header is finite and fits its ranges ([`Scan::validate`]): what
+/// perception and the controller take, so that a scan is checked once, where it enters
+/// (a laser frame: [`ValidScan::from_frame`]), and never again. It reads as the
+/// [`Scan`] it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidScan<'a>(Scan<'a>);
+
+impl<'a> Deref for ValidScan<'a> {
+    type Target = Scan<'a>;
+
+    fn deref(&self) -> &Scan<'a> {
+        &self.0
+    }
+}
+
+impl<'a> ValidScan<'a> {
+    /// A laser frame (already checked as a frame by its port) as perception reads it,
+    /// stamped with the controller's time `stamp`, checked as a scan.
+    pub fn from_frame(frame: &'a LaserFrame, stamp: f64) -> Result<Self, PerceptionError> {
+        Scan {
+            stamp,
+            angle_min: f64::from(frame.angle_min),
+            angle_increment: f64::from(frame.angle_increment),
+            range_min: f64::from(frame.range_min),
+            range_max: f64::from(frame.range_max),
+            ranges: frame.ranges(),
+        }
+        .validate()
+    }
+}
+
+impl<'a> Scan<'a> {
+    /// Checks the scan's header against its ranges: the scan, valid.
+    pub fn validate(&self) -> Result<ValidScan<'a>, PerceptionError> {
         check_finite("stamp", self.stamp)?;
         check_finite("angle_min", self.angle_min)?;
         check_finite("angle_increment", self.angle_increment)?;
@@ -114,7 +148,7 @@ impl Scan<'_> {
                 });
             }
         }
-        Ok(())
+        Ok(ValidScan(*self))
     }
 
     /// Beam i's angle in the laser frame.
@@ -159,13 +193,13 @@ pub struct ScanPoint {
 }
 
 /// The hits of a scan in beam order, transformed with the laser's mount (vehicle frame)
-/// and the vehicle's pose at the scan's stamp (world frame).
+/// and the vehicle's pose at the scan's stamp (world frame); refused when the mount or
+/// the pose is not finite.
 pub fn scan_points(
-    scan: &Scan<'_>,
+    scan: &ValidScan<'_>,
     mount: &Pose2,
     pose: &Pose2,
 ) -> Result<Vec<ScanPoint>, PerceptionError> {
-    scan.validate()?;
     mount.validate("mount.x", "mount.y", "mount.yaw")?;
     pose.validate("pose.x", "pose.y", "pose.yaw")?;
     let to_vehicle = mount.isometry();

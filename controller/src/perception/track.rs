@@ -10,26 +10,24 @@ use serde::{Deserialize, Serialize};
 use super::config::PerceptionConfig;
 use super::detect::{
     CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
-    cover_segment, detect, distance, distance_to_segment,
+    cover_segment, detect_with, distance, distance_to_segment,
 };
-use super::frame::{Pose2, Scan, ScanPoint};
+use super::frame::{Pose2, ScanPoint, ValidScan};
 use super::{PerceptionError, check_finite};
 use crate::planner::Obstacle;
 
-/// A circle for the planner (world frame, at the scan's stamp).
+/// A tracked disc: the planner's [`Obstacle`] (world frame, at the scan's stamp; its
+/// velocity after the dead band, zero for static obstacles) and what the tracker knows
+/// of it. Serialized flat, the disc's fields beside the others.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrackedObstacle {
     /// Track id (shared by all circles of one wall).
     pub id: u64,
     /// Index of the circle in its wall's chain (0 for posts and blobs).
     pub part: u32,
-    /// Centre, metres.
-    pub x: f64,
-    pub y: f64,
-    pub radius: f64,
-    /// Velocity after the dead band (zero for static obstacles), m/s.
-    pub vx: f64,
-    pub vy: f64,
+    /// The disc the planner takes, as it takes it.
+    #[serde(flatten)]
+    pub disc: Obstacle,
     /// The filter's velocity before the dead band, m/s.
     pub velocity_estimate: [f64; 2],
     pub kind: ObstacleKind,
@@ -41,19 +39,6 @@ pub struct TrackedObstacle {
     pub hits: u32,
     /// Consecutive scans without a detection (coasting when > 0).
     pub misses: u32,
-}
-
-impl TrackedObstacle {
-    /// The planner's obstacle (centre, radius, velocity).
-    pub fn to_planner(&self) -> Obstacle {
-        Obstacle {
-            x: self.x,
-            y: self.y,
-            radius: self.radius,
-            vx: self.vx,
-            vy: self.vy,
-        }
-    }
 }
 
 /// A tracked wall segment, for plotting.
@@ -83,10 +68,7 @@ pub struct PerceptionOutput {
 impl PerceptionOutput {
     /// The planner's obstacles.
     pub fn planner_obstacles(&self) -> Vec<Obstacle> {
-        self.obstacles
-            .iter()
-            .map(TrackedObstacle::to_planner)
-            .collect()
+        self.obstacles.iter().map(|o| o.disc).collect()
     }
 }
 
@@ -801,34 +783,42 @@ impl Perception {
 
     /// Detects and tracks one scan; `mount` is the laser's pose in the vehicle frame,
     /// `pose` the vehicle's in the world frame at the scan's stamp. Stamps must
-    /// increase. A refused scan leaves the tracks unchanged.
+    /// increase. A refused scan leaves the tracks unchanged. Each input is checked
+    /// once: the scan when it was made a [`ValidScan`], the configuration when this
+    /// was built, the stamp's order here, the mount and the pose by the detection.
     pub fn update(
         &mut self,
-        scan: &Scan<'_>,
+        scan: &ValidScan<'_>,
         mount: &Pose2,
         pose: &Pose2,
     ) -> Result<PerceptionOutput, PerceptionError> {
-        self.check_stamp(scan.stamp)?;
-        let detections = detect(scan, mount, pose, &self.cfg)?;
-        self.update_detections(&detections, pose)
+        self.check_stamp_order(scan.stamp)?;
+        let detections = detect_with(scan, mount, pose, &self.cfg)?;
+        Ok(self.track(&detections, pose))
     }
 
-    /// Tracks one scan's detections (from [`detect`], e.g. kept for plotting).
+    /// Tracks one scan's detections (from [`super::detect`], e.g. kept for plotting),
+    /// its stamp and `pose` checked.
     pub fn update_detections(
         &mut self,
         detections: &Detections,
         pose: &Pose2,
     ) -> Result<PerceptionOutput, PerceptionError> {
-        let stamp = detections.stamp;
-        check_finite("stamp", stamp)?;
+        check_finite("stamp", detections.stamp)?;
         pose.validate("pose.x", "pose.y", "pose.yaw")?;
-        self.check_stamp(stamp)?;
+        self.check_stamp_order(detections.stamp)?;
+        Ok(self.track(detections, pose))
+    }
+
+    /// Tracks one scan's detections, its stamp and `pose` checked.
+    fn track(&mut self, detections: &Detections, pose: &Pose2) -> PerceptionOutput {
+        let stamp = detections.stamp;
         let dt = self.last_stamp.map_or(0.0, |last| stamp - last);
         self.last_stamp = Some(stamp);
         let still = self.still_clusters(detections);
         self.track_points(detections, pose, dt, &still);
         self.track_walls(detections, pose, &still);
-        Ok(self.output(stamp, pose, true))
+        self.output(stamp, pose, true)
     }
 
     /// Posts and blobs: predicts, associates, updates, remembers or misses, and
@@ -1114,11 +1104,13 @@ impl Perception {
             obstacles.push(TrackedObstacle {
                 id: t.id,
                 part: 0,
-                x,
-                y,
-                radius: t.radius,
-                vx,
-                vy,
+                disc: Obstacle {
+                    x,
+                    y,
+                    radius: t.radius,
+                    vx,
+                    vy,
+                },
                 velocity_estimate: [t.state[2], t.state[3]],
                 kind: t.kind,
                 confidence: t.life.confidence(cfg),
@@ -1130,8 +1122,8 @@ impl Perception {
         obstacles
     }
 
-    fn check_stamp(&self, stamp: f64) -> Result<(), PerceptionError> {
-        check_finite("stamp", stamp)?;
+    /// A (finite) stamp after the previous scan's.
+    fn check_stamp_order(&self, stamp: f64) -> Result<(), PerceptionError> {
         match self.last_stamp {
             Some(previous) if stamp <= previous => {
                 Err(PerceptionError::StampNotIncreasing { stamp, previous })
@@ -1193,11 +1185,13 @@ impl WallTrack {
             pieces.push(TrackedObstacle {
                 id: self.id,
                 part: u32::try_from(part).unwrap_or(u32::MAX),
-                x: c[0],
-                y: c[1],
-                radius,
-                vx,
-                vy,
+                disc: Obstacle {
+                    x: c[0],
+                    y: c[1],
+                    radius,
+                    vx,
+                    vy,
+                },
                 velocity_estimate: self.velocity,
                 kind: ObstacleKind::WallPiece,
                 confidence,
@@ -1282,6 +1276,38 @@ fn normal_offset(old: &SegmentMeasurement, new: &SegmentMeasurement) -> Option<f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tracked obstacle is written flat, its disc's fields beside the tracker's (as
+    /// when they were its own), and reads back.
+    #[test]
+    fn a_tracked_obstacle_serialises_flat_and_reads_back() {
+        let o = TrackedObstacle {
+            id: 7,
+            part: 2,
+            disc: Obstacle {
+                x: 1.5,
+                y: -2.0,
+                radius: 0.3,
+                vx: 0.5,
+                vy: 0.0,
+            },
+            velocity_estimate: [0.5, 0.01],
+            kind: ObstacleKind::Post,
+            confidence: 1.0,
+            age: 2.5,
+            hits: 100,
+            misses: 0,
+        };
+        let json = serde_json::to_string(&o).expect("serialises");
+        assert!(
+            json.starts_with(
+                r#"{"id":7,"part":2,"x":1.5,"y":-2.0,"radius":0.3,"vx":0.5,"vy":0.0,"#
+            ),
+            "{json}"
+        );
+        let back: TrackedObstacle = serde_json::from_str(&json).expect("reads back");
+        assert_eq!(back, o);
+    }
 
     #[test]
     fn gating_by_position_finds_the_pairs_all_against_all_does() {

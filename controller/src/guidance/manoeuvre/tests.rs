@@ -17,8 +17,8 @@ fn settings() -> Settings {
     }
 }
 
-fn post(x: f64, y: f64, radius: f64) -> Circle {
-    Circle {
+fn post(x: f64, y: f64, radius: f64) -> Obstacle {
+    Obstacle {
         x,
         y,
         radius,
@@ -28,7 +28,7 @@ fn post(x: f64, y: f64, radius: f64) -> Circle {
 }
 
 /// A wall from `a` to `b` as a chain of circles of radius `r`.
-fn wall(a: (f64, f64), b: (f64, f64), r: f64) -> Vec<Circle> {
+fn wall(a: (f64, f64), b: (f64, f64), r: f64) -> Vec<Obstacle> {
     let n = ((b.0 - a.0).hypot(b.1 - a.1) / r).ceil() as usize;
     (0..=n)
         .map(|k| {
@@ -38,7 +38,7 @@ fn wall(a: (f64, f64), b: (f64, f64), r: f64) -> Vec<Circle> {
         .collect()
 }
 
-fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Circle>) -> ManoeuvreRequest {
+fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Obstacle>) -> ManoeuvreRequest {
     ManoeuvreRequest {
         start,
         goals: vec![Goal {
@@ -154,7 +154,7 @@ fn an_enclosed_goal_is_unreachable_and_says_so() {
 fn a_moving_obstacle_is_kept_clear_of_along_its_way() {
     // A cart crossing 6 m ahead from the right at 1.5 m/s: its swept track blocks the
     // way straight on for the next 3 s.
-    let cart = Circle {
+    let cart = Obstacle {
         vy: 1.5,
         ..post(6.0, -4.0, 0.8)
     };
