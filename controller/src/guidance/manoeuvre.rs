@@ -289,10 +289,7 @@ impl ManoeuvreRequest {
                     ..self.footprint
                 },
                 settings: Settings {
-                    max_expansions: self
-                        .settings
-                        .max_expansions
-                        .saturating_sub(expansions),
+                    max_expansions: self.settings.max_expansions.saturating_sub(expansions),
                     ..self.settings
                 },
                 ..self.clone()
