@@ -2,8 +2,8 @@
 //! of [`Controller::tick`], called every 10 ms, which runs the mode machine (waiting
 //! for the sensors, enabling the ECUs, driving, arrived, estop), asks guidance for the
 //! steering and speed, and stops the car on what [`crate::safety`] finds. The loop
-//! ([`crate::runtime`]) wires it to the real endpoints (the binary) or to memory ports
-//! in lockstep (SIL, replay) through the same codecs.
+//! (`runtime.rs`, one loop over clock and ports) wires it to the real endpoints (the
+//! binary) or to memory ports in lockstep (SIL, replay) through the same codecs.
 
 use firmware_bridge::Received;
 use firmware_bridge::clock::next_slot;

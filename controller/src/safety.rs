@@ -12,7 +12,7 @@
 //! - The intrusion watch ([`intrusion`]): actuation nobody commanded, a second sender
 //!   on the bus.
 //!
-//! The controller ([`crate::control`]) runs [`check`] at every tick while it enables
+//! The controller (`control.rs`) runs [`check`] at every tick while it enables
 //! and drives, and the intrusion watch on every frame, and estops on the first
 //! finding: estop heartbeat, FAULT_REPORT, both ECUs commanded disabled.
 
