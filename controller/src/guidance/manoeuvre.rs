@@ -257,13 +257,20 @@ impl ManoeuvreRequest {
     }
 
     /// [`ManoeuvreRequest::plan`], and where it finds no way at the margin (the goal
-    /// and the car's own pose clear), an escape ([`ManoeuvreRequest::escape`]).
+    /// and the car's own pose clear), an escape ([`ManoeuvreRequest::escape`]); where it
+    /// finds only a partial manoeuvre that backs off (a cusp or more: the way on is
+    /// tight at the margin), a complete escape if there is one, so the car creeps
+    /// through the narrow place before it rather than shuffling round it.
     pub fn plan_or_escape(&self, field: &Field) -> (Result<Planned, Failure>, usize) {
         let (found, expansions) = self.plan(field);
         match found {
             Err(e @ (Failure::Exhausted(_) | Failure::Unreachable)) => {
-                let (escape, more) = self.escape();
+                let (escape, more) = self.escape(false);
                 (escape.ok_or(e), expansions + more)
+            }
+            Ok(partial) if !partial.complete && partial.manoeuvre.cusps() > 0 => {
+                let (escape, more) = self.escape(true);
+                (Ok(escape.unwrap_or(partial)), expansions + more)
             }
             found => (found, expansions),
         }
@@ -275,8 +282,9 @@ impl ManoeuvreRequest {
     /// through: the same search with the margin narrowed to twice `escape_margin`,
     /// then (with what that one left of the budget) to it, cut where the rectangle
     /// clears every obstacle by the full margin again ([`ESCAPE_CLEAR`]); driven at a
-    /// crawl. With the expansions it took.
-    pub fn escape(&self) -> (Option<Planned>, usize) {
+    /// crawl. Only one that reaches a goal at its margin if `complete_only`. With the
+    /// expansions it took.
+    pub fn escape(&self, complete_only: bool) -> (Option<Planned>, usize) {
         let full = self.field_at(None);
         let mut expansions = 0;
         for margin in [2.0 * self.escape_margin, self.escape_margin] {
@@ -299,8 +307,11 @@ impl ManoeuvreRequest {
             }
             let (found, n) = narrow.plan(&narrow.field());
             expansions += n;
-            if let Ok(planned) = found {
-                return (Some(planned.escaping(margin, &full)), expansions);
+            match found {
+                Ok(planned) if planned.complete || !complete_only => {
+                    return (Some(planned.escaping(margin, &full)), expansions);
+                }
+                _ => {}
             }
         }
         (None, expansions)

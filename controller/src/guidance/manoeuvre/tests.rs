@@ -315,7 +315,7 @@ fn a_gap_wide_enough_for_the_car_but_not_its_margin_is_crept_through_and_left_be
     // At the margin no way through (at most a partial manoeuvre short of the gap).
     let field = req.field();
     assert!(!matches!(req.plan(&field).0, Ok(p) if p.complete));
-    let escape = req.escape().0.expect("an escape");
+    let escape = req.escape(false).0.expect("an escape");
     assert_eq!(escape.escape_margin, Some(0.1));
     let keeps = |p: &PathPoint, m: f64| {
         req.obstacles
@@ -339,4 +339,33 @@ fn a_car_with_room_at_the_margin_gets_no_escape() {
     let (found, _) = req.plan_or_escape(&field);
     let found = found.expect("a manoeuvre");
     assert!(found.complete && found.escape_margin.is_none());
+}
+
+#[test]
+fn a_partial_manoeuvre_that_backs_off_gives_way_to_an_escape_through_the_gap_ahead() {
+    // The 1.5 m gap again, the wall now ending 9 m either side of it: at the margin the
+    // search backs off towards an end it cannot reach within its budget; the gap before
+    // the car is the way, at the escape's margin.
+    let mut posts = wall((6.0, 0.95), (6.0, 9.0), 0.2);
+    posts.extend(wall((6.0, -0.95), (6.0, -9.0), 0.2));
+    let req = ManoeuvreRequest {
+        footprint: Footprint {
+            margin: 0.25,
+            ..CAR
+        },
+        ..request([3.275, 0.0, 0.0], [12.0, 0.0, 0.0], posts)
+    };
+    let field = req.field();
+    let (plain, n) = req.plan(&field);
+    let plain = plain.expect("a partial manoeuvre at the margin");
+    assert!(!plain.complete && plain.manoeuvre.cusps() > 0, "{plain:?}");
+    let (found, expansions) = req.plan_or_escape(&field);
+    let escape = found.expect("a manoeuvre");
+    assert!(expansions > n);
+    assert_eq!(escape.escape_margin, Some(0.1));
+    assert_eq!(escape.manoeuvre.cusps(), 0);
+    let points = &escape.manoeuvre.points;
+    assert!(points.iter().all(|p| p.forward));
+    let end = points[points.len() - 1];
+    assert!(end.x > 6.0 && end.y.abs() < 0.5, "{end:?}");
 }
