@@ -547,7 +547,7 @@ impl Navigator {
             hand_back: self
                 .manoeuvre
                 .as_ref()
-                .is_some_and(manoeuvre::Following::on_last_forward),
+                .is_some_and(manoeuvre::Following::may_hand_back),
         }
     }
 

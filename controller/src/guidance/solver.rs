@@ -173,8 +173,9 @@ pub struct PlanRequest {
     /// The manoeuvre planner's search, when no polynomial path is feasible, or the
     /// check of the manoeuvre being followed; None with traffic near the car.
     pub manoeuvre: Option<ManoeuvreRequest>,
-    /// The manoeuvre being followed is on its last segment, forward: a feasible
-    /// polynomial path takes over from it.
+    /// The manoeuvre being followed is on a forward segment with at most a short nudge
+    /// after it ([`super::manoeuvre::Following::may_hand_back`]): a feasible polynomial path
+    /// takes over from it.
     pub hand_back: bool,
 }
 
@@ -238,10 +239,10 @@ fn failed_search(outcome: &mut PlanOutcome, failed: ManoeuvreRecord) {
 }
 
 /// [`solve`] while a manoeuvre is followed: kept while the car's rectangle clears the
-/// rest of it (on its last segment forward, a feasible polynomial path takes over; a
-/// partial one driven on is searched again, [`ManoeuvreRequest::look_again`], and a
-/// complete manoeuvre found takes over); else searched anew from where the car is, and
-/// with none found, the polynomial's outcome.
+/// rest of it (on a forward segment with at most a short nudge after it, a feasible
+/// polynomial path takes over; a partial one driven on is searched again,
+/// [`ManoeuvreRequest::look_again`], and a complete manoeuvre found takes over); else
+/// searched anew from where the car is, and with none found, the polynomial's outcome.
 fn solve_following(req: &PlanRequest, m: &ManoeuvreRequest) -> PlanOutcome {
     if m.following_holds() {
         if req.hand_back {

@@ -41,6 +41,12 @@ pub struct Command {
 /// time this much more of it has been driven, metres: the laser has seen more.
 const LOOK_AGAIN_M: f64 = 2.0;
 
+/// A feasible polynomial path takes over from a forward segment after which at most this
+/// much of the manoeuvre is left, metres: the search reaches its goal pose exactly, and
+/// a turn into the way on may end in a short nudge back that the polynomial, driving on,
+/// does not need.
+const HAND_BACK_TAIL_M: f64 = 1.0;
+
 /// A manoeuvre being followed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Following {
@@ -117,11 +123,15 @@ impl Following {
         }
     }
 
-    /// On the last segment, driving forward: the polynomial may take over.
-    pub fn on_last_forward(&self) -> bool {
-        self.segment + 1 == self.segments.len()
-            && self.segments[self.segment].start < self.manoeuvre.points.len()
-            && self.manoeuvre.points[self.segments[self.segment].start].forward
+    /// On a forward segment after which at most [`HAND_BACK_TAIL_M`] is left (the last
+    /// segment, or a last short nudge to the search's goal pose): the polynomial may
+    /// take over.
+    pub fn may_hand_back(&self) -> bool {
+        let Some(range) = self.segments.get(self.segment) else {
+            return false;
+        };
+        let tail = self.manoeuvre.points.len().saturating_sub(range.end);
+        self.manoeuvre.points[range.start].forward && tail as f64 * SAMPLE <= HAND_BACK_TAIL_M
     }
 
     /// Every segment driven.
@@ -395,5 +405,40 @@ mod tests {
         assert!(partial.look_again());
         // A complete manoeuvre is driven to its end as it is.
         assert!(!complete.look_again());
+    }
+
+    #[test]
+    fn the_polynomial_may_take_over_on_a_forward_segment_with_at_most_a_short_nudge_after_it() {
+        let at = |x: f64| Pose {
+            x,
+            y: 0.0,
+            theta: 0.0,
+            v: 1.0,
+            phi: 0.0,
+        };
+        // Forward 6 m, then back 0.5 m: on the forward segment already.
+        let mut nudge = Following::new(sampled([0.0; 3], &[(6.0, 0.0), (-0.5, 0.0)]), true);
+        assert!(nudge.may_hand_back());
+        // Forward, then back 3 m: not before the last segment, and that one backward.
+        let mut back = Following::new(sampled([0.0; 3], &[(3.0, 0.0), (-3.0, 0.0)]), true);
+        assert!(!back.may_hand_back());
+        let end = Pose { v: 0.0, ..at(3.0) };
+        back.command(&end, &end, &LAW, &PACE);
+        assert!(!back.finished() && !back.may_hand_back());
+        // Back, then forward: on the forward one.
+        let mut turn = Following::new(sampled([0.0; 3], &[(-1.0, 0.0), (4.0, 0.0)]), true);
+        assert!(!turn.may_hand_back());
+        let stand = Pose {
+            v: 0.0,
+            ..at(-0.95)
+        };
+        turn.command(&stand, &stand, &LAW, &PACE);
+        assert!(turn.may_hand_back());
+        // Every segment driven: nothing to hand back.
+        for x in [3.0, 6.0, 5.5] {
+            let p = Pose { v: 0.0, ..at(x) };
+            nudge.command(&p, &p, &LAW, &PACE);
+        }
+        assert!(nudge.finished() && !nudge.may_hand_back());
     }
 }
