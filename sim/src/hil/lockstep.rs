@@ -7,9 +7,11 @@
 //! deterministic and as fast as the two processes go.
 //!
 //! A controller that stops acknowledging is a fault like any other: once its process
-//! has exited, or after [`ACK_TIMEOUT`] of wall time, the run goes on in simulated time
-//! without it, and the ECUs' watchdogs (on simulated time) take the car to its safe
-//! state; the verdict's times are simulated ones.
+//! has exited, or after [`ACK_TIMEOUT`] of wall time without using the CPU (one that
+//! works, a long search in an emulated VM, is waited for longer: [`BUSY_BOUNDS`]; one
+//! started separately, of which the simulator knows no process, for [`ACK_TIMEOUT`]),
+//! the run goes on in simulated time without it, and the ECUs' watchdogs (on simulated
+//! time) take the car to its safe state; the verdict's times are simulated ones.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -32,6 +34,12 @@ use crate::run::{Outcome, Sim, Snapshot};
 /// controller for gone: long, since a controller in a software-emulated VM may take
 /// seconds for a search that takes a tenth of that natively.
 pub const ACK_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// A controller that has not acknowledged within its bound but used CPU time over it (a
+/// long search in an emulated VM, its loop waiting for the plan as in SIL) is waited
+/// for over one more bound, this many times at most; one that used none (hung, stopped)
+/// is taken for gone.
+pub const BUSY_BOUNDS: u32 = 5;
 
 /// How long the simulator waits for the first acknowledgement (a controller started by
 /// hand, or one that loads a model first).
@@ -88,7 +96,8 @@ impl Lockstep {
     }
 
     /// The answer `wait` waits for, in slices, while the controller's process lives,
-    /// for at most `bound`; `what` names what is answered.
+    /// for at most `bound` (more while it works: [`BUSY_BOUNDS`]); `what` names what is
+    /// answered.
     fn answer(
         &self,
         bound: Duration,
@@ -96,7 +105,9 @@ impl Lockstep {
         what: &str,
         wait: impl Fn(&ClockLeader, Duration) -> Result<Option<ClockAck>, ClockError>,
     ) -> Result<Answer, HilError> {
-        let deadline = Instant::now() + bound;
+        let mut deadline = Instant::now() + bound;
+        let mut cpu = controller.as_deref().and_then(ControllerProcess::cpu_ticks);
+        let mut extended = 0;
         loop {
             let slice = Duration::from_millis(50);
             if let Some(ack) = wait(&self.leader, slice).map_err(clock_err)? {
@@ -108,10 +119,24 @@ impl Lockstep {
                 return Ok(Answer::Gone(format!("the controller exited ({status})")));
             }
             if Instant::now() >= deadline {
-                return Ok(Answer::Gone(format!(
-                    "the controller did not acknowledge {what} within {} s of wall time (lockstep)",
-                    bound.as_secs()
-                )));
+                let used = controller.as_deref().and_then(ControllerProcess::cpu_ticks);
+                let busy = used.is_some() && used > cpu;
+                if busy && extended < BUSY_BOUNDS {
+                    (cpu, extended, deadline) = (used, extended + 1, deadline + bound);
+                    continue;
+                }
+                let waited = bound.as_secs() * u64::from(extended + 1);
+                return Ok(Answer::Gone(if busy {
+                    format!(
+                        "the controller did not acknowledge {what} within {waited} s of wall \
+                         time, though busy all along (lockstep)"
+                    )
+                } else {
+                    format!(
+                        "the controller did not acknowledge {what} within {waited} s of wall \
+                         time (lockstep)"
+                    )
+                }));
             }
         }
     }

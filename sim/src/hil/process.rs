@@ -240,12 +240,33 @@ impl ControllerProcess {
         self.child.wait().ok()
     }
 
+    /// CPU time the controller's process has used so far (user and system, all its
+    /// threads), in clock ticks; None once it cannot be read (gone).
+    pub fn cpu_ticks(&self) -> Option<u64> {
+        cpu_ticks(self.child.id())
+    }
+
     /// Send `signal` to the controller's process (gone already: nothing to do).
     pub fn signal(&self, signal: nix::sys::signal::Signal) {
         if let Ok(pid) = i32::try_from(self.child.id()) {
             let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), signal);
         }
     }
+}
+
+/// CPU time of process `pid` so far, clock ticks (utime + stime of /proc/PID/stat).
+fn cpu_ticks(pid: u32) -> Option<u64> {
+    parse_cpu_ticks(&std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?)
+}
+
+/// utime + stime of a /proc/PID/stat line: its fields 14 and 15, counted from the
+/// first after the command name's closing parenthesis (field 3; the name may hold
+/// spaces and parentheses).
+fn parse_cpu_ticks(stat: &str) -> Option<u64> {
+    let mut fields = stat[stat.rfind(')')? + 1..].split_whitespace().skip(14 - 3);
+    let utime: u64 = fields.next()?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some(utime + stime)
 }
 
 #[cfg(test)]
@@ -283,5 +304,33 @@ mod tests {
             !after.contains(&master) && !after.contains(&slave),
             "the child still holds {after:?} (master {master}, slave {slave})"
         );
+    }
+
+    #[test]
+    fn cpu_time_is_read_after_a_command_name_with_spaces_and_parentheses() {
+        let stat = "4242 (ugv (ctl) x) R 1 4242 4242 0 -1 4194304 120 0 0 0 731 69 0 0 20 0 3 0";
+        assert_eq!(parse_cpu_ticks(stat), Some(800));
+        assert_eq!(parse_cpu_ticks("4242 (cut short) R 1 2"), None);
+        assert_eq!(parse_cpu_ticks("no parenthesis"), None);
+    }
+
+    #[test]
+    fn a_busy_process_uses_cpu_time_and_a_sleeping_one_does_not() {
+        let mut busy = Command::new("sh")
+            .args(["-c", "while :; do :; done"])
+            .spawn()
+            .expect("sh runs");
+        let mut idle = Command::new("sleep").arg("5").spawn().expect("sleep runs");
+        let (b0, i0) = (cpu_ticks(busy.id()), cpu_ticks(idle.id()));
+        std::thread::sleep(Duration::from_millis(500));
+        let (b1, i1) = (cpu_ticks(busy.id()), cpu_ticks(idle.id()));
+        for child in [&mut busy, &mut idle] {
+            child.kill().expect("kill");
+            child.wait().expect("wait");
+        }
+        assert!(b1 > b0, "{b0:?} -> {b1:?}");
+        assert_eq!(i0, i1);
+        assert!(i0.is_some());
+        assert_eq!(cpu_ticks(busy.id()), None, "a reaped process has no stat");
     }
 }
