@@ -298,20 +298,24 @@ fn a_car_hemmed_in_at_the_margin_creeps_out_with_a_narrower_one_until_it_clears_
     assert!(!keeps(&points[0], 0.25));
 }
 
-#[test]
-fn a_gap_wide_enough_for_the_car_but_not_its_margin_is_crept_through_and_left_behind() {
-    // A wall across the way with a gap 1.5 m wide: the car (1.2 m) keeps 0.15 m either
-    // side, not its 0.25 m margin. The car stands before it, its nose 0.5 m short (as far
-    // as partial manoeuvres brought it).
-    let mut posts = wall((6.0, 0.95), (6.0, 11.0), 0.2);
-    posts.extend(wall((6.0, -0.95), (6.0, -11.0), 0.2));
-    let req = ManoeuvreRequest {
+/// A wall across the way, reaching `end` metres either side, with a gap 1.5 m wide: the
+/// car (1.2 m) keeps 0.15 m either side, not its 0.25 m margin. The car stands before
+/// it, its nose 0.5 m short (as far as partial manoeuvres brought it).
+fn gap_in_wall(end: f64) -> ManoeuvreRequest {
+    let mut posts = wall((6.0, 0.95), (6.0, end), 0.2);
+    posts.extend(wall((6.0, -0.95), (6.0, -end), 0.2));
+    ManoeuvreRequest {
         footprint: Footprint {
             margin: 0.25,
             ..CAR
         },
         ..request([3.275, 0.0, 0.0], [12.0, 0.0, 0.0], posts)
-    };
+    }
+}
+
+#[test]
+fn a_gap_wide_enough_for_the_car_but_not_its_margin_is_crept_through_and_left_behind() {
+    let req = gap_in_wall(11.0);
     // At the margin no way through (at most a partial manoeuvre short of the gap).
     let field = req.field();
     assert!(!matches!(req.plan(&field).0, Ok(p) if p.complete));
@@ -343,18 +347,10 @@ fn a_car_with_room_at_the_margin_gets_no_escape() {
 
 #[test]
 fn a_partial_manoeuvre_that_backs_off_gives_way_to_an_escape_through_the_gap_ahead() {
-    // The 1.5 m gap again, the wall now ending 9 m either side of it: at the margin the
-    // search backs off towards an end it cannot reach within its budget; the gap before
-    // the car is the way, at the escape's margin.
-    let mut posts = wall((6.0, 0.95), (6.0, 9.0), 0.2);
-    posts.extend(wall((6.0, -0.95), (6.0, -9.0), 0.2));
-    let req = ManoeuvreRequest {
-        footprint: Footprint {
-            margin: 0.25,
-            ..CAR
-        },
-        ..request([3.275, 0.0, 0.0], [12.0, 0.0, 0.0], posts)
-    };
+    // The wall ending 9 m either side of the gap: at the margin the search backs off
+    // towards an end it cannot reach within its budget; the gap before the car is the
+    // way, at the escape's margin.
+    let req = gap_in_wall(9.0);
     let field = req.field();
     let (plain, n) = req.plan(&field);
     let plain = plain.expect("a partial manoeuvre at the margin");
