@@ -44,8 +44,10 @@ use foxglove::schemas::{
     Color, FrameTransform, LaserScan, LinePrimitive, LocationFix, Point3, Quaternion, SceneEntity,
     SceneUpdate, Timestamp, Vector3,
 };
-use foxglove::{Channel, Context, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel};
-use golf_car_can::candump::Compact;
+use foxglove::{
+    Channel, Context, Encode, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel,
+};
+use golf_car_can::candump::{Compact, push_decimal, push_hex_bytes};
 use golf_car_can::spec::NetworkSpec;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -98,6 +100,8 @@ pub enum RecordError {
         #[source]
         source: foxglove::FoxgloveError,
     },
+    #[error("encoding golf_car.dbc's names for /can/decoded: {0}")]
+    Json(#[source] serde_json::Error),
     #[error("golf_car.dbc: {0}")]
     Dbc(#[from] golf_car_can::spec::SpecError),
     #[error("the CAN tap on {iface}: {source}")]
@@ -350,12 +354,165 @@ fn json_channel(
         .build_raw()
 }
 
+/// The `foxglove.LaserScan` channel of scans like `frame`: its metadata keeps the
+/// frame's constant fields exactly (f32 text round-trips), for replay.
+fn laser_channel(
+    ctx: &Arc<Context>,
+    frame: &LaserFrame,
+) -> Result<Arc<RawChannel>, foxglove::FoxgloveError> {
+    let meta = BTreeMap::from([
+        ("angle_min".to_owned(), frame.angle_min.to_string()),
+        (
+            "angle_increment".to_owned(),
+            frame.angle_increment.to_string(),
+        ),
+        (
+            "time_increment".to_owned(),
+            frame.time_increment.to_string(),
+        ),
+        ("scan_time".to_owned(), frame.scan_time.to_string()),
+        ("range_min".to_owned(), frame.range_min.to_string()),
+        ("range_max".to_owned(), frame.range_max.to_string()),
+    ]);
+    ctx.channel_builder(topics::LASER)
+        .message_encoding(LaserScan::get_message_encoding())
+        .schema(LaserScan::get_schema())
+        .metadata(meta)
+        .build_raw()
+}
+
+/// Append `frame` as a `foxglove.LaserScan` message (protobuf), the bytes the SDK's
+/// own encoding gives: the head (stamp, frame `laser`, angles) by the SDK, then the
+/// ranges and the intensities (fields 6 and 7, packed doubles) straight from the
+/// frame's f32, without a `Vec<f64>` of each or the SDK's per-value buffer checks.
+pub fn encode_scan(
+    buf: &mut Vec<u8>,
+    frame: &LaserFrame,
+) -> Result<(), <LaserScan as Encode>::Error> {
+    let head = LaserScan {
+        timestamp: Some(timestamp(frame.stamp_ns)),
+        frame_id: "laser".to_owned(),
+        pose: None,
+        start_angle: f64::from(frame.angle_min),
+        end_angle: f64::from(frame.angle_max()),
+        ranges: Vec::new(),
+        intensities: Vec::new(),
+    };
+    Encode::encode(&head, buf)?;
+    packed_doubles(buf, 6, frame.ranges());
+    packed_doubles(buf, 7, frame.intensities());
+    Ok(())
+}
+
+/// Append the protobuf field `field` of `values` as packed doubles (nothing when
+/// empty, as proto3 has it).
+fn packed_doubles(buf: &mut Vec<u8>, field: u64, values: &[f32]) {
+    if values.is_empty() {
+        return;
+    }
+    push_varint(buf, field << 3 | 2);
+    push_varint(buf, 8 * values.len() as u64);
+    buf.reserve(8 * values.len());
+    for v in values {
+        buf.extend_from_slice(&f64::from(*v).to_le_bytes());
+    }
+}
+
+/// Append `n` as a protobuf varint.
+fn push_varint(buf: &mut Vec<u8>, mut n: u64) {
+    while n >= 0x80 {
+        buf.push((n & 0x7F) as u8 | 0x80);
+        n >>= 7;
+    }
+    buf.push(n as u8);
+}
+
+/// `/can/raw` and `/can/decoded` written by hand into a reused buffer: the keys are
+/// known, so no map, no `serde_json::Value`, no escaping per frame; each message's
+/// JSON up to its first signal's value is made once. The bytes are those serde_json
+/// gave the maps before (keys in name order, numbers as serde_json writes them).
+#[derive(Debug)]
+struct CanJson {
+    /// golf_car.dbc, each message's signals sorted by name (the order of the keys of
+    /// `/can/decoded`'s `signals`).
+    spec: NetworkSpec,
+    /// For each of `spec`'s messages: `{"id":ID,"message":"NAME","signals":{`, and
+    /// each signal's `"NAME":` (after a comma but the first).
+    heads: Vec<(Vec<u8>, Vec<Vec<u8>>)>,
+}
+
+impl CanJson {
+    fn new(mut spec: NetworkSpec) -> Result<CanJson, serde_json::Error> {
+        let mut heads = Vec::with_capacity(spec.messages.len());
+        for m in spec.messages.to_mut() {
+            m.signals.to_mut().sort_by(|a, b| a.name.cmp(&b.name));
+            let head = format!(
+                r#"{{"id":{},"message":{},"signals":{{"#,
+                m.id,
+                serde_json::to_string(&m.name)?
+            );
+            let mut keys = Vec::with_capacity(m.signals.len());
+            for (i, s) in m.signals.iter().enumerate() {
+                let comma = if i == 0 { "" } else { "," };
+                keys.push(format!("{comma}{}:", serde_json::to_string(&s.name)?).into_bytes());
+            }
+            heads.push((head.into_bytes(), keys));
+        }
+        Ok(CanJson { spec, heads })
+    }
+
+    /// `/can/raw`'s message of `f` into `buf`; `direction` as seen by the recorder.
+    fn raw(buf: &mut Vec<u8>, f: &TapFrame, direction: &str) {
+        buf.extend_from_slice(br#"{"data":""#);
+        push_hex_bytes(buf, &f.data);
+        buf.extend_from_slice(br#"","direction":""#);
+        buf.extend_from_slice(direction.as_bytes());
+        buf.extend_from_slice(br#"","extended":"#);
+        buf.extend_from_slice(if f.extended { b"true" } else { b"false" });
+        buf.extend_from_slice(br#","id":"#);
+        push_decimal(buf, u64::from(f.id), 1);
+        if let Some(sent) = f.sent {
+            buf.extend_from_slice(br#","sent":"#);
+            buf.extend_from_slice(if sent { b"true" } else { b"false" });
+        }
+        if let Some(k) = f.kernel {
+            buf.extend_from_slice(br#","wall_unix_ns":"#);
+            push_decimal(buf, unix_ns(k), 1);
+        }
+        buf.push(b'}');
+    }
+
+    /// `/can/decoded`'s message of a standard frame `id` with `data` into `buf`;
+    /// false (and nothing written) when golf_car.dbc has no such message or the data
+    /// is not eight bytes.
+    fn decoded(&self, buf: &mut Vec<u8>, id: u16, data: &[u8]) -> Result<bool, serde_json::Error> {
+        let Some(at) = self.spec.messages.iter().position(|m| m.id == id) else {
+            return Ok(false);
+        };
+        let (Some(m), Some((head, keys)), Ok(p)) = (
+            self.spec.messages.get(at),
+            self.heads.get(at),
+            golf_car_can::codec::payload("", data),
+        ) else {
+            return Ok(false);
+        };
+        buf.extend_from_slice(head);
+        for (s, key) in m.signals.iter().zip(keys) {
+            buf.extend_from_slice(key);
+            serde_json::to_writer(&mut *buf, &s.get(&p))?;
+        }
+        buf.extend_from_slice(b"}}");
+        Ok(true)
+    }
+}
+
 /// Writes one recording: the topics every recording has, on a [`Context`] the
 /// simulator adds its world's channels to.
 pub struct Writer {
     ctx: Arc<Context>,
     mcap: Option<McapWriterHandle<BufWriter<File>>>,
-    laser: Option<Channel<LaserScan>>,
+    /// `foxglove.LaserScan`, encoded by [`encode_scan`].
+    laser: Option<Arc<RawChannel>>,
     fix: Channel<LocationFix>,
     tf: Channel<FrameTransform>,
     /// The sensors' mounts, logged with the car's pose ([`Writer::with_mounts`]).
@@ -372,7 +529,10 @@ pub struct Writer {
     nmea_file: TextOut,
     /// The start of an NMEA line whose end has not come yet.
     nmea_line: Vec<u8>,
-    spec: NetworkSpec,
+    /// A buffer reused for each message's encoding (a frame's bus.log line, its JSON,
+    /// a scan).
+    scratch: Vec<u8>,
+    can_json: CanJson,
     info: RunInfo,
     last_flush: Instant,
     /// The log time of the last flush by log time ([`Writer::maybe_flush_at`]).
@@ -458,7 +618,9 @@ impl Writer {
             bus_log: text(BUS_LOG)?,
             nmea_file: text(NMEA_FILE)?,
             nmea_line: Vec::new(),
-            spec: NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?,
+            scratch: Vec::new(),
+            can_json: CanJson::new(NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?)
+                .map_err(RecordError::Json)?,
             info,
             last_flush: Instant::now(),
             last_flush_t: 0.0,
@@ -620,46 +782,27 @@ impl Writer {
     }
 
     /// A laser frame at `t` as `foxglove.LaserScan` (the channel's metadata keeps the
-    /// frame's constant fields exactly, for replay).
+    /// frame's constant fields exactly, for replay), encoded by [`encode_scan`].
     pub fn laser(&mut self, t: f64, frame: &LaserFrame) {
         if self.laser.is_none() {
-            // f32 text round-trips.
-            let meta = BTreeMap::from([
-                ("angle_min".to_owned(), frame.angle_min.to_string()),
-                (
-                    "angle_increment".to_owned(),
-                    frame.angle_increment.to_string(),
-                ),
-                (
-                    "time_increment".to_owned(),
-                    frame.time_increment.to_string(),
-                ),
-                ("scan_time".to_owned(), frame.scan_time.to_string()),
-                ("range_min".to_owned(), frame.range_min.to_string()),
-                ("range_max".to_owned(), frame.range_max.to_string()),
-            ]);
-            self.laser = Some(
-                self.ctx
-                    .channel_builder(topics::LASER)
-                    .metadata(meta)
-                    .build(),
-            );
+            match laser_channel(&self.ctx, frame) {
+                Ok(c) => self.laser = Some(c),
+                Err(e) => {
+                    self.note_error(format!("creating the channel {}: {e}", topics::LASER));
+                    return;
+                }
+            }
         }
+        let ns = self.ns(t);
         let Some(channel) = &self.laser else {
             return;
         };
-        channel.log_with_time(
-            &LaserScan {
-                timestamp: Some(timestamp(frame.stamp_ns)),
-                frame_id: "laser".to_owned(),
-                pose: None,
-                start_angle: f64::from(frame.angle_min),
-                end_angle: f64::from(frame.angle_max()),
-                ranges: frame.ranges().iter().map(|r| f64::from(*r)).collect(),
-                intensities: frame.intensities().iter().map(|r| f64::from(*r)).collect(),
-            },
-            self.ns(t),
-        );
+        self.scratch.clear();
+        if let Err(e) = encode_scan(&mut self.scratch, frame) {
+            self.note_error(format!("encoding a scan: {e}"));
+            return;
+        }
+        channel.log_with_meta(&self.scratch, PartialMetadata::with_log_time(ns));
         self.summary.laser_scans += 1;
     }
 
@@ -670,55 +813,34 @@ impl Writer {
     /// whatever its ID, so a second sender on the controller's IDs is not taken for
     /// the controller.
     pub fn can(&mut self, t: f64, f: &TapFrame) {
-        let TapFrame {
-            id,
-            extended,
-            data,
-            kernel,
-            sent,
-        } = f;
-        let (id, extended) = (*id, *extended);
         let ns = self.ns(t);
-        let stamp = kernel.map_or(ns, unix_ns);
-        let compact = Compact { id, extended, data };
-        let line = format!(
-            "({}.{:06}) {} {compact}\n",
-            stamp / 1_000_000_000,
-            (stamp % 1_000_000_000) / 1000,
-            self.info.can_interface
-        );
+        let meta = PartialMetadata::with_log_time(ns);
+        let compact = Compact {
+            id: f.id,
+            extended: f.extended,
+            data: &f.data,
+        };
+        let buf = &mut self.scratch;
+        buf.clear();
+        compact.push_log_line(buf, f.kernel.map_or(ns, unix_ns), &self.info.can_interface);
         let mut error = self.summary.error.take();
-        self.bus_log.write(line.as_bytes(), &mut error);
+        self.bus_log.write(buf, &mut error);
         self.summary.error = error;
-        let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
-        let mut raw = json!({
-            "id": id,
-            "extended": extended,
-            "data": hex,
-            "direction": match sent {
-                Some(false) => "tx",
-                Some(true) | None => direction(&self.spec, id),
-            },
-        });
-        if let Some(sent) = sent {
-            raw["sent"] = (*sent).into();
-        }
-        if let Some(k) = kernel {
-            raw["wall_unix_ns"] = unix_ns(*k).into();
-        }
-        self.log_json(&self.can_raw, t, &raw);
-        let message = (!extended)
-            .then(|| u16::try_from(id).ok())
-            .flatten()
-            .and_then(|id| self.spec.message(id));
-        if let (Some(m), Ok(p)) = (message, golf_car_can::codec::payload("", data)) {
-            let signals: serde_json::Map<String, serde_json::Value> = m
-                .decode_all(&p)
-                .into_iter()
-                .map(|v| (v.name.to_owned(), v.value.into()))
-                .collect();
-            let decoded = json!({ "id": id, "message": m.name, "signals": signals });
-            self.log_json(&self.can_decoded, t, &decoded);
+        let direction = match f.sent {
+            Some(false) => "tx",
+            Some(true) | None => direction(&self.can_json.spec, f.id),
+        };
+        buf.clear();
+        CanJson::raw(buf, f, direction);
+        self.can_raw.log_with_meta(buf, meta);
+        let standard = (!f.extended).then(|| u16::try_from(f.id).ok()).flatten();
+        if let Some(id) = standard {
+            buf.clear();
+            match self.can_json.decoded(buf, id, &f.data) {
+                Ok(true) => self.can_decoded.log_with_meta(buf, meta),
+                Ok(false) => {}
+                Err(e) => self.note_error(format!("encoding {}: {e}", topics::CAN_DECODED)),
+            }
         }
         self.summary.can_frames += 1;
     }
