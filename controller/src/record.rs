@@ -102,8 +102,6 @@ pub enum RecordError {
     },
     #[error("encoding golf_car.dbc's names for /can/decoded: {0}")]
     Json(#[source] serde_json::Error),
-    #[error("golf_car.dbc: {0}")]
-    Dbc(#[from] golf_car_can::spec::SpecError),
     #[error("the CAN tap on {iface}: {source}")]
     Tap {
         iface: String,
@@ -412,9 +410,10 @@ fn packed_doubles(buf: &mut Vec<u8>, field: u64, values: &[f32]) {
     }
     push_varint(buf, field << 3 | 2);
     push_varint(buf, 8 * values.len() as u64);
-    buf.reserve(8 * values.len());
-    for v in values {
-        buf.extend_from_slice(&f64::from(*v).to_le_bytes());
+    let at = buf.len();
+    buf.resize(at + 8 * values.len(), 0);
+    for (out, v) in buf[at..].chunks_exact_mut(8).zip(values) {
+        out.copy_from_slice(&f64::from(*v).to_le_bytes());
     }
 }
 
@@ -436,15 +435,28 @@ struct CanJson {
     /// golf_car.dbc, each message's signals sorted by name (the order of the keys of
     /// `/can/decoded`'s `signals`).
     spec: NetworkSpec,
-    /// For each of `spec`'s messages: `{"id":ID,"message":"NAME","signals":{`, and
-    /// each signal's `"NAME":` (after a comma but the first).
-    heads: Vec<(Vec<u8>, Vec<Vec<u8>>)>,
+    /// For each of `spec`'s messages, in its order.
+    messages: Vec<MessageJson>,
+}
+
+/// One message's JSON made once: `{"id":ID,"message":"NAME","signals":{`, each
+/// signal's `"NAME":` (after a comma but the first), its [`direction`].
+#[derive(Debug)]
+struct MessageJson {
+    head: Vec<u8>,
+    keys: Vec<Vec<u8>>,
+    direction: &'static str,
 }
 
 impl CanJson {
     fn new(mut spec: NetworkSpec) -> Result<CanJson, serde_json::Error> {
-        let mut heads = Vec::with_capacity(spec.messages.len());
-        for m in spec.messages.to_mut() {
+        let directions: Vec<_> = spec
+            .messages
+            .iter()
+            .map(|m| direction(&spec, u32::from(m.id)))
+            .collect();
+        let mut messages = Vec::with_capacity(spec.messages.len());
+        for (m, direction) in spec.messages.to_mut().iter_mut().zip(directions) {
             m.signals.to_mut().sort_by(|a, b| a.name.cmp(&b.name));
             let head = format!(
                 r#"{{"id":{},"message":{},"signals":{{"#,
@@ -456,9 +468,25 @@ impl CanJson {
                 let comma = if i == 0 { "" } else { "," };
                 keys.push(format!("{comma}{}:", serde_json::to_string(&s.name)?).into_bytes());
             }
-            heads.push((head.into_bytes(), keys));
+            messages.push(MessageJson {
+                head: head.into_bytes(),
+                keys,
+                direction,
+            });
         }
-        Ok(CanJson { spec, heads })
+        Ok(CanJson { spec, messages })
+    }
+
+    /// Where the message of ID `id` is in the spec, if it has one.
+    fn position(&self, id: u32) -> Option<usize> {
+        let id = u16::try_from(id).ok()?;
+        self.spec.messages.iter().position(|m| m.id == id)
+    }
+
+    /// [`direction`] of a frame of ID `id`, the message at `at` ([`CanJson::position`]).
+    fn direction(&self, at: Option<usize>) -> &'static str {
+        at.and_then(|i| self.messages.get(i))
+            .map_or("tx", |m| m.direction)
     }
 
     /// `/can/raw`'s message of `f` into `buf`; `direction` as seen by the recorder.
@@ -482,22 +510,19 @@ impl CanJson {
         buf.push(b'}');
     }
 
-    /// `/can/decoded`'s message of a standard frame `id` with `data` into `buf`;
-    /// false (and nothing written) when golf_car.dbc has no such message or the data
-    /// is not eight bytes.
-    fn decoded(&self, buf: &mut Vec<u8>, id: u16, data: &[u8]) -> Result<bool, serde_json::Error> {
-        let Some(at) = self.spec.messages.iter().position(|m| m.id == id) else {
-            return Ok(false);
-        };
-        let (Some(m), Some((head, keys)), Ok(p)) = (
+    /// `/can/decoded`'s message of a standard frame with `data` of the message at
+    /// `at` ([`CanJson::position`]) into `buf`; false (and nothing written) when the
+    /// data is not eight bytes.
+    fn decoded(&self, buf: &mut Vec<u8>, at: usize, data: &[u8]) -> Result<bool, serde_json::Error> {
+        let (Some(m), Some(json), Ok(p)) = (
             self.spec.messages.get(at),
-            self.heads.get(at),
+            self.messages.get(at),
             golf_car_can::codec::payload("", data),
         ) else {
             return Ok(false);
         };
-        buf.extend_from_slice(head);
-        for (s, key) in m.signals.iter().zip(keys) {
+        buf.extend_from_slice(&json.head);
+        for (s, key) in m.signals.iter().zip(&json.keys) {
             buf.extend_from_slice(key);
             serde_json::to_writer(&mut *buf, &s.get(&p))?;
         }
@@ -619,8 +644,7 @@ impl Writer {
             nmea_file: text(NMEA_FILE)?,
             nmea_line: Vec::new(),
             scratch: Vec::new(),
-            can_json: CanJson::new(NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?)
-                .map_err(RecordError::Json)?,
+            can_json: CanJson::new(golf_car_can::NETWORK.clone()).map_err(RecordError::Json)?,
             info,
             last_flush: Instant::now(),
             last_flush_t: 0.0,
@@ -695,6 +719,7 @@ impl Writer {
         self.nmea_file.write(bytes, &mut error);
         self.summary.error = error;
         let wall = self.wall();
+        let ns = self.ns(t);
         for &b in bytes {
             self.nmea_line.push(b);
             if b != b'\n' && self.nmea_line.len() < MAX_LINE {
@@ -706,11 +731,20 @@ impl Writer {
             if sentence.is_empty() {
                 continue;
             }
-            let mut m = json!({ "sentence": sentence });
-            if let Some(w) = wall {
-                m["wall_unix_ns"] = w.into();
+            // {"sentence":...,"wall_unix_ns":...} by hand, as for the CAN frames.
+            let buf = &mut self.scratch;
+            buf.clear();
+            buf.extend_from_slice(br#"{"sentence":"#);
+            if let Err(e) = serde_json::to_writer(&mut *buf, sentence) {
+                self.note_error(format!("encoding {}: {e}", topics::NMEA));
+                continue;
             }
-            self.log_json(&self.nmea, t, &m);
+            if let Some(w) = wall {
+                buf.extend_from_slice(br#","wall_unix_ns":"#);
+                push_decimal(buf, w, 1);
+            }
+            buf.push(b'}');
+            self.nmea.log_with_meta(buf, PartialMetadata::with_log_time(ns));
             self.summary.nmea_sentences += 1;
         }
     }
@@ -826,17 +860,17 @@ impl Writer {
         let mut error = self.summary.error.take();
         self.bus_log.write(buf, &mut error);
         self.summary.error = error;
+        let at = self.can_json.position(f.id);
         let direction = match f.sent {
             Some(false) => "tx",
-            Some(true) | None => direction(&self.can_json.spec, f.id),
+            Some(true) | None => self.can_json.direction(at),
         };
         buf.clear();
         CanJson::raw(buf, f, direction);
         self.can_raw.log_with_meta(buf, meta);
-        let standard = (!f.extended).then(|| u16::try_from(f.id).ok()).flatten();
-        if let Some(id) = standard {
+        if let Some(at) = at.filter(|_| !f.extended) {
             buf.clear();
-            match self.can_json.decoded(buf, id, &f.data) {
+            match self.can_json.decoded(buf, at, &f.data) {
                 Ok(true) => self.can_decoded.log_with_meta(buf, meta),
                 Ok(false) => {}
                 Err(e) => self.note_error(format!("encoding {}: {e}", topics::CAN_DECODED)),
@@ -1188,6 +1222,141 @@ impl Writer {
             Entry::Plan(t, planned) => self.plan(t, &planned),
             Entry::Fix(t, reading) => self.reading(t, &reading),
             Entry::Pose(t, [x, y, theta]) => self.base_link(t, x, y, theta),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan of `n` beams with ranges, a dropout and no return among them.
+    fn scan(n: u32) -> LaserFrame {
+        let mut f = LaserFrame {
+            count: n,
+            stamp_ns: 1_700_000_000_123_456_789,
+            angle_min: -2.35,
+            angle_increment: 0.0087,
+            range_max: 20.0,
+            ..LaserFrame::default()
+        };
+        for i in 0..n as usize {
+            f.ranges[i] = 0.5 + i as f32 * 0.37;
+            f.intensities[i] = i as f32;
+        }
+        if n > 2 {
+            f.ranges[1] = f32::NAN;
+            f.ranges[2] = f32::INFINITY;
+        }
+        f
+    }
+
+    #[test]
+    fn scans_are_encoded_as_the_sdk_encodes_a_laser_scan() {
+        for n in [0, 1, 3, 541] {
+            let frame = scan(n);
+            let sdk = LaserScan {
+                timestamp: Some(timestamp(frame.stamp_ns)),
+                frame_id: "laser".to_owned(),
+                pose: None,
+                start_angle: f64::from(frame.angle_min),
+                end_angle: f64::from(frame.angle_max()),
+                ranges: frame.ranges().iter().map(|r| f64::from(*r)).collect(),
+                intensities: frame.intensities().iter().map(|r| f64::from(*r)).collect(),
+            };
+            let mut expected = Vec::new();
+            Encode::encode(&sdk, &mut expected).unwrap();
+            let mut ours = vec![0xAA];
+            encode_scan(&mut ours, &frame).unwrap();
+            assert_eq!(ours[1..], expected[..], "{n} beams");
+        }
+    }
+
+    /// What the recorder wrote per frame before (serde_json maps).
+    fn as_maps(spec: &NetworkSpec, f: &TapFrame) -> (String, Option<String>) {
+        let hex: String = f.data.iter().map(|b| format!("{b:02X}")).collect();
+        let mut raw = json!({
+            "id": f.id,
+            "extended": f.extended,
+            "data": hex,
+            "direction": match f.sent {
+                Some(false) => "tx",
+                Some(true) | None => direction(spec, f.id),
+            },
+        });
+        if let Some(sent) = f.sent {
+            raw["sent"] = sent.into();
+        }
+        if let Some(k) = f.kernel {
+            raw["wall_unix_ns"] = unix_ns(k).into();
+        }
+        let message = (!f.extended)
+            .then(|| u16::try_from(f.id).ok())
+            .flatten()
+            .and_then(|id| spec.message(id));
+        let decoded = match (message, golf_car_can::codec::payload("", &f.data)) {
+            (Some(m), Ok(p)) => {
+                let signals: serde_json::Map<String, serde_json::Value> = m
+                    .decode_all(&p)
+                    .into_iter()
+                    .map(|v| (v.name.to_owned(), v.value.into()))
+                    .collect();
+                Some(json!({ "id": f.id, "message": m.name, "signals": signals }).to_string())
+            }
+            _ => None,
+        };
+        (raw.to_string(), decoded)
+    }
+
+    #[test]
+    fn can_json_is_what_the_maps_gave_for_every_message_and_odd_frames() {
+        let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC).unwrap();
+        // The recorder's is the one built in; the maps' the DBC read at run time.
+        let can = CanJson::new(golf_car_can::NETWORK.clone()).unwrap();
+        let kernel = Some(SystemTime::UNIX_EPOCH + Duration::from_nanos(1_700_000_000_987_654_321));
+        let mut frames: Vec<TapFrame> = spec
+            .messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| TapFrame {
+                id: u32::from(m.id),
+                extended: false,
+                data: (0..8).map(|b| (b * 37 + i * 101) as u8).collect(),
+                kernel: if i % 2 == 0 { kernel } else { None },
+                sent: [None, Some(true), Some(false)][i % 3],
+            })
+            .collect();
+        assert!(frames.len() > 3, "golf_car.dbc has its messages");
+        for (id, extended, len) in [(0x7FF, false, 8), (0x123, true, 8), (0x1FFF_FFFF, true, 0)] {
+            frames.push(TapFrame {
+                id,
+                extended,
+                data: vec![0xFF; len],
+                kernel: None,
+                sent: None,
+            });
+        }
+        // A known message with a short payload: raw only.
+        frames.push(TapFrame {
+            data: vec![1, 2],
+            ..frames[0].clone()
+        });
+        for f in &frames {
+            let (raw, decoded) = as_maps(&spec, f);
+            let at = can.position(f.id);
+            let direction = match f.sent {
+                Some(false) => "tx",
+                _ => can.direction(at),
+            };
+            let mut buf = Vec::new();
+            CanJson::raw(&mut buf, f, direction);
+            assert_eq!(String::from_utf8(buf).unwrap(), raw);
+            let mut buf = Vec::new();
+            let written = match at.filter(|_| !f.extended) {
+                Some(at) => can.decoded(&mut buf, at, &f.data).unwrap(),
+                None => false,
+            };
+            assert_eq!(written.then(|| String::from_utf8(buf).unwrap()), decoded, "{f:?}");
         }
     }
 }
