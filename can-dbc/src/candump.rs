@@ -259,7 +259,10 @@ fn push_hex(out: &mut Vec<u8>, n: u32, width: u32) {
 
 /// A byte as two upper-case hex digits.
 pub fn hex_byte(b: u8) -> [u8; 2] {
-    [HEX_DIGITS[usize::from(b >> 4)], HEX_DIGITS[usize::from(b & 0xF)]]
+    [
+        HEX_DIGITS[usize::from(b >> 4)],
+        HEX_DIGITS[usize::from(b & 0xF)],
+    ]
 }
 
 /// Append `bytes` as hex, two upper-case digits each.

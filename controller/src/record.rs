@@ -513,7 +513,12 @@ impl CanJson {
     /// `/can/decoded`'s message of a standard frame with `data` of the message at
     /// `at` ([`CanJson::position`]) into `buf`; false (and nothing written) when the
     /// data is not eight bytes.
-    fn decoded(&self, buf: &mut Vec<u8>, at: usize, data: &[u8]) -> Result<bool, serde_json::Error> {
+    fn decoded(
+        &self,
+        buf: &mut Vec<u8>,
+        at: usize,
+        data: &[u8],
+    ) -> Result<bool, serde_json::Error> {
         let (Some(m), Some(json), Ok(p)) = (
             self.spec.messages.get(at),
             self.messages.get(at),
@@ -744,7 +749,8 @@ impl Writer {
                 push_decimal(buf, w, 1);
             }
             buf.push(b'}');
-            self.nmea.log_with_meta(buf, PartialMetadata::with_log_time(ns));
+            self.nmea
+                .log_with_meta(buf, PartialMetadata::with_log_time(ns));
             self.summary.nmea_sentences += 1;
         }
     }
@@ -1356,7 +1362,11 @@ mod tests {
                 Some(at) => can.decoded(&mut buf, at, &f.data).unwrap(),
                 None => false,
             };
-            assert_eq!(written.then(|| String::from_utf8(buf).unwrap()), decoded, "{f:?}");
+            assert_eq!(
+                written.then(|| String::from_utf8(buf).unwrap()),
+                decoded,
+                "{f:?}"
+            );
         }
     }
 }
