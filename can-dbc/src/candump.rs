@@ -241,15 +241,70 @@ pub struct Compact<'a> {
 
 impl fmt::Display for Compact<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.extended {
-            write!(f, "{:08X}#", self.id)?;
-        } else {
-            write!(f, "{:03X}#", self.id)?;
-        }
-        for b in self.data {
-            write!(f, "{b:02X}")?;
-        }
-        Ok(())
+        let mut text = Vec::with_capacity(9 + 2 * self.data.len());
+        self.push_to(&mut text);
+        f.write_str(std::str::from_utf8(&text).map_err(|_| fmt::Error)?)
+    }
+}
+
+const HEX_DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+
+/// Append `n` in hex, upper case, at least `width` digits (zero-padded).
+fn push_hex(out: &mut Vec<u8>, n: u32, width: u32) {
+    let digits = width.max((32 - n.leading_zeros()).div_ceil(4));
+    for i in (0..digits).rev() {
+        out.push(HEX_DIGITS[(n >> (4 * i) & 0xF) as usize]);
+    }
+}
+
+/// A byte as two upper-case hex digits.
+pub fn hex_byte(b: u8) -> [u8; 2] {
+    [
+        HEX_DIGITS[usize::from(b >> 4)],
+        HEX_DIGITS[usize::from(b & 0xF)],
+    ]
+}
+
+/// Append `bytes` as hex, two upper-case digits each.
+pub fn push_hex_bytes(out: &mut Vec<u8>, bytes: &[u8]) {
+    for b in bytes {
+        out.extend_from_slice(&hex_byte(*b));
+    }
+}
+
+/// Append `n` in decimal, at least `width` digits (zero-padded).
+pub fn push_decimal(out: &mut Vec<u8>, n: u64, width: usize) {
+    let mut digits = [0u8; 20];
+    let (mut n, mut len) = (n, 0);
+    while n > 0 || len < width.max(1) {
+        digits[len] = b'0' + (n % 10) as u8;
+        n /= 10;
+        len += 1;
+    }
+    out.extend(digits[..len].iter().rev());
+}
+
+impl Compact<'_> {
+    /// Append what [`Display`](fmt::Display) writes, without the formatting machinery
+    /// (a recorder writes one for every frame on the bus).
+    pub fn push_to(&self, out: &mut Vec<u8>) {
+        push_hex(out, self.id, if self.extended { 8 } else { 3 });
+        out.push(b'#');
+        push_hex_bytes(out, self.data);
+    }
+
+    /// Append the `candump -l` line of this frame received at `unix_ns` (ns since
+    /// 1970) on `iface`: `(seconds.micros) IFACE ID#DATA` and its newline.
+    pub fn push_log_line(&self, out: &mut Vec<u8>, unix_ns: u64, iface: &str) {
+        out.push(b'(');
+        push_decimal(out, unix_ns / 1_000_000_000, 1);
+        out.push(b'.');
+        push_decimal(out, (unix_ns % 1_000_000_000) / 1000, 6);
+        out.extend_from_slice(b") ");
+        out.extend_from_slice(iface.as_bytes());
+        out.push(b' ');
+        self.push_to(out);
+        out.push(b'\n');
     }
 }
 
@@ -412,5 +467,42 @@ mod tests {
             parse_compact(&text).unwrap(),
             (0x1F, false, false, data.to_vec())
         );
+    }
+
+    #[test]
+    fn log_lines_are_what_the_format_machinery_writes() {
+        let data = [0x00, 0x0A, 0xF0, 0xFF, 0x7C];
+        for (id, extended) in [
+            (0, false),
+            (0x1F, false),
+            (0x7FF, false),
+            (0x1ABC, false),
+            (0, true),
+            (0x1FFF_FFFF, true),
+        ] {
+            for ns in [0, 999, 1_700_000_000_123_456_789, u64::MAX] {
+                for len in [0, 1, data.len()] {
+                    let c = Compact {
+                        id,
+                        extended,
+                        data: &data[..len],
+                    };
+                    let mut line = Vec::new();
+                    c.push_log_line(&mut line, ns, "vcan0");
+                    let hex: String = c.data.iter().map(|b| format!("{b:02X}")).collect();
+                    let id_text = match extended {
+                        true => format!("{id:08X}"),
+                        false => format!("{id:03X}"),
+                    };
+                    let expected = format!(
+                        "({}.{:06}) vcan0 {id_text}#{hex}\n",
+                        ns / 1_000_000_000,
+                        (ns % 1_000_000_000) / 1000
+                    );
+                    assert_eq!(String::from_utf8(line).unwrap(), expected);
+                    assert_eq!(c.to_string(), format!("{id_text}#{hex}"));
+                }
+            }
+        }
     }
 }

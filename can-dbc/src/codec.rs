@@ -29,18 +29,48 @@ impl SignalSpec {
 
     /// The raw value as the signal's integer type (sign-extended when signed).
     pub fn get_raw(&self, data: &Payload) -> i128 {
-        let mut raw: u64 = 0;
-        for (i, bit) in self.lsb_first_bits().into_iter().enumerate() {
-            if data[bit / 8] >> (bit % 8) & 1 == 1 {
-                raw |= 1 << i;
+        let raw = match self.word_shift() {
+            // The signal's bits are consecutive in the frame read as one integer
+            // (little-endian for Intel, big-endian for Motorola's sawtooth order).
+            Some(shift) => {
+                let word = match self.byte_order {
+                    ByteOrder::Intel => u64::from_le_bytes(*data),
+                    ByteOrder::Motorola => u64::from_be_bytes(*data),
+                };
+                (word >> shift) & (u64::MAX >> (64 - u32::from(self.size)))
             }
-        }
+            None => self.walk_raw(data),
+        };
         let size = u32::from(self.size);
         if self.signed && raw >> (size - 1) & 1 == 1 {
             i128::from(raw) - (1i128 << size)
         } else {
             i128::from(raw)
         }
+    }
+
+    /// Where the signal's least significant bit is in the frame read as one integer
+    /// (see [`SignalSpec::get_raw`]); `None` for a layout that runs outside the frame
+    /// or has no bits.
+    fn word_shift(&self) -> Option<u32> {
+        let (start, size) = (u32::from(self.start_bit), u32::from(self.size));
+        let shift = match self.byte_order {
+            ByteOrder::Intel => Some(start),
+            // The MSB's place counted from the frame's first bit sent, downwards.
+            ByteOrder::Motorola => 64u32.checked_sub((start / 8) * 8 + (7 - start % 8) + size),
+        };
+        shift.filter(|s| size >= 1 && s + size <= 64)
+    }
+
+    /// The raw bits gathered one by one (least significant first).
+    fn walk_raw(&self, data: &Payload) -> u64 {
+        let mut raw: u64 = 0;
+        for (i, bit) in self.lsb_first_bits().into_iter().enumerate() {
+            if data[bit / 8] >> (bit % 8) & 1 == 1 {
+                raw |= 1 << i;
+            }
+        }
+        raw
     }
 
     /// The range of raw values the signal's bits can hold.

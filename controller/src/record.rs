@@ -44,8 +44,10 @@ use foxglove::schemas::{
     Color, FrameTransform, LaserScan, LinePrimitive, LocationFix, Point3, Quaternion, SceneEntity,
     SceneUpdate, Timestamp, Vector3,
 };
-use foxglove::{Channel, Context, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel};
-use golf_car_can::candump::Compact;
+use foxglove::{
+    Channel, Context, Encode, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel,
+};
+use golf_car_can::candump::{Compact, push_decimal, push_hex_bytes};
 use golf_car_can::spec::NetworkSpec;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -98,8 +100,8 @@ pub enum RecordError {
         #[source]
         source: foxglove::FoxgloveError,
     },
-    #[error("golf_car.dbc: {0}")]
-    Dbc(#[from] golf_car_can::spec::SpecError),
+    #[error("encoding golf_car.dbc's names for /can/decoded: {0}")]
+    Json(#[source] serde_json::Error),
     #[error("the CAN tap on {iface}: {source}")]
     Tap {
         iface: String,
@@ -350,12 +352,197 @@ fn json_channel(
         .build_raw()
 }
 
+/// The `foxglove.LaserScan` channel of scans like `frame`: its metadata keeps the
+/// frame's constant fields exactly (f32 text round-trips), for replay.
+fn laser_channel(
+    ctx: &Arc<Context>,
+    frame: &LaserFrame,
+) -> Result<Arc<RawChannel>, foxglove::FoxgloveError> {
+    let meta = BTreeMap::from([
+        ("angle_min".to_owned(), frame.angle_min.to_string()),
+        (
+            "angle_increment".to_owned(),
+            frame.angle_increment.to_string(),
+        ),
+        (
+            "time_increment".to_owned(),
+            frame.time_increment.to_string(),
+        ),
+        ("scan_time".to_owned(), frame.scan_time.to_string()),
+        ("range_min".to_owned(), frame.range_min.to_string()),
+        ("range_max".to_owned(), frame.range_max.to_string()),
+    ]);
+    ctx.channel_builder(topics::LASER)
+        .message_encoding(LaserScan::get_message_encoding())
+        .schema(LaserScan::get_schema())
+        .metadata(meta)
+        .build_raw()
+}
+
+/// Append `frame` as a `foxglove.LaserScan` message (protobuf), the bytes the SDK's
+/// own encoding gives: the head (stamp, frame `laser`, angles) by the SDK, then the
+/// ranges and the intensities (fields 6 and 7, packed doubles) straight from the
+/// frame's f32, without a `Vec<f64>` of each or the SDK's per-value buffer checks.
+pub fn encode_scan(
+    buf: &mut Vec<u8>,
+    frame: &LaserFrame,
+) -> Result<(), <LaserScan as Encode>::Error> {
+    let head = LaserScan {
+        timestamp: Some(timestamp(frame.stamp_ns)),
+        frame_id: "laser".to_owned(),
+        pose: None,
+        start_angle: f64::from(frame.angle_min),
+        end_angle: f64::from(frame.angle_max()),
+        ranges: Vec::new(),
+        intensities: Vec::new(),
+    };
+    Encode::encode(&head, buf)?;
+    packed_doubles(buf, 6, frame.ranges());
+    packed_doubles(buf, 7, frame.intensities());
+    Ok(())
+}
+
+/// Append the protobuf field `field` of `values` as packed doubles (nothing when
+/// empty, as proto3 has it).
+fn packed_doubles(buf: &mut Vec<u8>, field: u64, values: &[f32]) {
+    if values.is_empty() {
+        return;
+    }
+    push_varint(buf, field << 3 | 2);
+    push_varint(buf, 8 * values.len() as u64);
+    let at = buf.len();
+    buf.resize(at + 8 * values.len(), 0);
+    for (out, v) in buf[at..].chunks_exact_mut(8).zip(values) {
+        out.copy_from_slice(&f64::from(*v).to_le_bytes());
+    }
+}
+
+/// Append `n` as a protobuf varint.
+fn push_varint(buf: &mut Vec<u8>, mut n: u64) {
+    while n >= 0x80 {
+        buf.push((n & 0x7F) as u8 | 0x80);
+        n >>= 7;
+    }
+    buf.push(n as u8);
+}
+
+/// `/can/raw` and `/can/decoded` written by hand into a reused buffer: the keys are
+/// known, so no map, no `serde_json::Value`, no escaping per frame; each message's
+/// JSON up to its first signal's value is made once. The bytes are those serde_json
+/// gave the maps before (keys in name order, numbers as serde_json writes them).
+#[derive(Debug)]
+struct CanJson {
+    /// golf_car.dbc, each message's signals sorted by name (the order of the keys of
+    /// `/can/decoded`'s `signals`).
+    spec: NetworkSpec,
+    /// For each of `spec`'s messages, in its order.
+    messages: Vec<MessageJson>,
+}
+
+/// One message's JSON made once: `{"id":ID,"message":"NAME","signals":{`, each
+/// signal's `"NAME":` (after a comma but the first), its [`direction`].
+#[derive(Debug)]
+struct MessageJson {
+    head: Vec<u8>,
+    keys: Vec<Vec<u8>>,
+    direction: &'static str,
+}
+
+impl CanJson {
+    fn new(mut spec: NetworkSpec) -> Result<CanJson, serde_json::Error> {
+        let directions: Vec<_> = spec
+            .messages
+            .iter()
+            .map(|m| direction(&spec, u32::from(m.id)))
+            .collect();
+        let mut messages = Vec::with_capacity(spec.messages.len());
+        for (m, direction) in spec.messages.to_mut().iter_mut().zip(directions) {
+            m.signals.to_mut().sort_by(|a, b| a.name.cmp(&b.name));
+            let head = format!(
+                r#"{{"id":{},"message":{},"signals":{{"#,
+                m.id,
+                serde_json::to_string(&m.name)?
+            );
+            let mut keys = Vec::with_capacity(m.signals.len());
+            for (i, s) in m.signals.iter().enumerate() {
+                let comma = if i == 0 { "" } else { "," };
+                keys.push(format!("{comma}{}:", serde_json::to_string(&s.name)?).into_bytes());
+            }
+            messages.push(MessageJson {
+                head: head.into_bytes(),
+                keys,
+                direction,
+            });
+        }
+        Ok(CanJson { spec, messages })
+    }
+
+    /// Where the message of ID `id` is in the spec, if it has one.
+    fn position(&self, id: u32) -> Option<usize> {
+        let id = u16::try_from(id).ok()?;
+        self.spec.messages.iter().position(|m| m.id == id)
+    }
+
+    /// [`direction`] of a frame of ID `id`, the message at `at` ([`CanJson::position`]).
+    fn direction(&self, at: Option<usize>) -> &'static str {
+        at.and_then(|i| self.messages.get(i))
+            .map_or("tx", |m| m.direction)
+    }
+
+    /// `/can/raw`'s message of `f` into `buf`; `direction` as seen by the recorder.
+    fn raw(buf: &mut Vec<u8>, f: &TapFrame, direction: &str) {
+        buf.extend_from_slice(br#"{"data":""#);
+        push_hex_bytes(buf, &f.data);
+        buf.extend_from_slice(br#"","direction":""#);
+        buf.extend_from_slice(direction.as_bytes());
+        buf.extend_from_slice(br#"","extended":"#);
+        buf.extend_from_slice(if f.extended { b"true" } else { b"false" });
+        buf.extend_from_slice(br#","id":"#);
+        push_decimal(buf, u64::from(f.id), 1);
+        if let Some(sent) = f.sent {
+            buf.extend_from_slice(br#","sent":"#);
+            buf.extend_from_slice(if sent { b"true" } else { b"false" });
+        }
+        if let Some(k) = f.kernel {
+            buf.extend_from_slice(br#","wall_unix_ns":"#);
+            push_decimal(buf, unix_ns(k), 1);
+        }
+        buf.push(b'}');
+    }
+
+    /// `/can/decoded`'s message of a standard frame with `data` of the message at
+    /// `at` ([`CanJson::position`]) into `buf`; false (and nothing written) when the
+    /// data is not eight bytes.
+    fn decoded(
+        &self,
+        buf: &mut Vec<u8>,
+        at: usize,
+        data: &[u8],
+    ) -> Result<bool, serde_json::Error> {
+        let (Some(m), Some(json), Ok(p)) = (
+            self.spec.messages.get(at),
+            self.messages.get(at),
+            golf_car_can::codec::payload("", data),
+        ) else {
+            return Ok(false);
+        };
+        buf.extend_from_slice(&json.head);
+        for (s, key) in m.signals.iter().zip(&json.keys) {
+            buf.extend_from_slice(key);
+            serde_json::to_writer(&mut *buf, &s.get(&p))?;
+        }
+        buf.extend_from_slice(b"}}");
+        Ok(true)
+    }
+}
+
 /// Writes one recording: the topics every recording has, on a [`Context`] the
 /// simulator adds its world's channels to.
 pub struct Writer {
     ctx: Arc<Context>,
     mcap: Option<McapWriterHandle<BufWriter<File>>>,
-    laser: Option<Channel<LaserScan>>,
+    /// `foxglove.LaserScan`, encoded by [`encode_scan`].
+    laser: Option<Arc<RawChannel>>,
     fix: Channel<LocationFix>,
     tf: Channel<FrameTransform>,
     /// The sensors' mounts, logged with the car's pose ([`Writer::with_mounts`]).
@@ -372,7 +559,10 @@ pub struct Writer {
     nmea_file: TextOut,
     /// The start of an NMEA line whose end has not come yet.
     nmea_line: Vec<u8>,
-    spec: NetworkSpec,
+    /// A buffer reused for each message's encoding (a frame's bus.log line, its JSON,
+    /// a scan).
+    scratch: Vec<u8>,
+    can_json: CanJson,
     info: RunInfo,
     last_flush: Instant,
     /// The log time of the last flush by log time ([`Writer::maybe_flush_at`]).
@@ -458,7 +648,8 @@ impl Writer {
             bus_log: text(BUS_LOG)?,
             nmea_file: text(NMEA_FILE)?,
             nmea_line: Vec::new(),
-            spec: NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC)?,
+            scratch: Vec::new(),
+            can_json: CanJson::new(golf_car_can::NETWORK.clone()).map_err(RecordError::Json)?,
             info,
             last_flush: Instant::now(),
             last_flush_t: 0.0,
@@ -533,6 +724,7 @@ impl Writer {
         self.nmea_file.write(bytes, &mut error);
         self.summary.error = error;
         let wall = self.wall();
+        let ns = self.ns(t);
         for &b in bytes {
             self.nmea_line.push(b);
             if b != b'\n' && self.nmea_line.len() < MAX_LINE {
@@ -544,11 +736,21 @@ impl Writer {
             if sentence.is_empty() {
                 continue;
             }
-            let mut m = json!({ "sentence": sentence });
-            if let Some(w) = wall {
-                m["wall_unix_ns"] = w.into();
+            // {"sentence":...,"wall_unix_ns":...} by hand, as for the CAN frames.
+            let buf = &mut self.scratch;
+            buf.clear();
+            buf.extend_from_slice(br#"{"sentence":"#);
+            if let Err(e) = serde_json::to_writer(&mut *buf, sentence) {
+                self.note_error(format!("encoding {}: {e}", topics::NMEA));
+                continue;
             }
-            self.log_json(&self.nmea, t, &m);
+            if let Some(w) = wall {
+                buf.extend_from_slice(br#","wall_unix_ns":"#);
+                push_decimal(buf, w, 1);
+            }
+            buf.push(b'}');
+            self.nmea
+                .log_with_meta(buf, PartialMetadata::with_log_time(ns));
             self.summary.nmea_sentences += 1;
         }
     }
@@ -620,46 +822,27 @@ impl Writer {
     }
 
     /// A laser frame at `t` as `foxglove.LaserScan` (the channel's metadata keeps the
-    /// frame's constant fields exactly, for replay).
+    /// frame's constant fields exactly, for replay), encoded by [`encode_scan`].
     pub fn laser(&mut self, t: f64, frame: &LaserFrame) {
         if self.laser.is_none() {
-            // f32 text round-trips.
-            let meta = BTreeMap::from([
-                ("angle_min".to_owned(), frame.angle_min.to_string()),
-                (
-                    "angle_increment".to_owned(),
-                    frame.angle_increment.to_string(),
-                ),
-                (
-                    "time_increment".to_owned(),
-                    frame.time_increment.to_string(),
-                ),
-                ("scan_time".to_owned(), frame.scan_time.to_string()),
-                ("range_min".to_owned(), frame.range_min.to_string()),
-                ("range_max".to_owned(), frame.range_max.to_string()),
-            ]);
-            self.laser = Some(
-                self.ctx
-                    .channel_builder(topics::LASER)
-                    .metadata(meta)
-                    .build(),
-            );
+            match laser_channel(&self.ctx, frame) {
+                Ok(c) => self.laser = Some(c),
+                Err(e) => {
+                    self.note_error(format!("creating the channel {}: {e}", topics::LASER));
+                    return;
+                }
+            }
         }
+        let ns = self.ns(t);
         let Some(channel) = &self.laser else {
             return;
         };
-        channel.log_with_time(
-            &LaserScan {
-                timestamp: Some(timestamp(frame.stamp_ns)),
-                frame_id: "laser".to_owned(),
-                pose: None,
-                start_angle: f64::from(frame.angle_min),
-                end_angle: f64::from(frame.angle_max()),
-                ranges: frame.ranges().iter().map(|r| f64::from(*r)).collect(),
-                intensities: frame.intensities().iter().map(|r| f64::from(*r)).collect(),
-            },
-            self.ns(t),
-        );
+        self.scratch.clear();
+        if let Err(e) = encode_scan(&mut self.scratch, frame) {
+            self.note_error(format!("encoding a scan: {e}"));
+            return;
+        }
+        channel.log_with_meta(&self.scratch, PartialMetadata::with_log_time(ns));
         self.summary.laser_scans += 1;
     }
 
@@ -670,55 +853,34 @@ impl Writer {
     /// whatever its ID, so a second sender on the controller's IDs is not taken for
     /// the controller.
     pub fn can(&mut self, t: f64, f: &TapFrame) {
-        let TapFrame {
-            id,
-            extended,
-            data,
-            kernel,
-            sent,
-        } = f;
-        let (id, extended) = (*id, *extended);
         let ns = self.ns(t);
-        let stamp = kernel.map_or(ns, unix_ns);
-        let compact = Compact { id, extended, data };
-        let line = format!(
-            "({}.{:06}) {} {compact}\n",
-            stamp / 1_000_000_000,
-            (stamp % 1_000_000_000) / 1000,
-            self.info.can_interface
-        );
+        let meta = PartialMetadata::with_log_time(ns);
+        let compact = Compact {
+            id: f.id,
+            extended: f.extended,
+            data: &f.data,
+        };
+        let buf = &mut self.scratch;
+        buf.clear();
+        compact.push_log_line(buf, f.kernel.map_or(ns, unix_ns), &self.info.can_interface);
         let mut error = self.summary.error.take();
-        self.bus_log.write(line.as_bytes(), &mut error);
+        self.bus_log.write(buf, &mut error);
         self.summary.error = error;
-        let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
-        let mut raw = json!({
-            "id": id,
-            "extended": extended,
-            "data": hex,
-            "direction": match sent {
-                Some(false) => "tx",
-                Some(true) | None => direction(&self.spec, id),
-            },
-        });
-        if let Some(sent) = sent {
-            raw["sent"] = (*sent).into();
-        }
-        if let Some(k) = kernel {
-            raw["wall_unix_ns"] = unix_ns(*k).into();
-        }
-        self.log_json(&self.can_raw, t, &raw);
-        let message = (!extended)
-            .then(|| u16::try_from(id).ok())
-            .flatten()
-            .and_then(|id| self.spec.message(id));
-        if let (Some(m), Ok(p)) = (message, golf_car_can::codec::payload("", data)) {
-            let signals: serde_json::Map<String, serde_json::Value> = m
-                .decode_all(&p)
-                .into_iter()
-                .map(|v| (v.name.to_owned(), v.value.into()))
-                .collect();
-            let decoded = json!({ "id": id, "message": m.name, "signals": signals });
-            self.log_json(&self.can_decoded, t, &decoded);
+        let at = self.can_json.position(f.id);
+        let direction = match f.sent {
+            Some(false) => "tx",
+            Some(true) | None => self.can_json.direction(at),
+        };
+        buf.clear();
+        CanJson::raw(buf, f, direction);
+        self.can_raw.log_with_meta(buf, meta);
+        if let Some(at) = at.filter(|_| !f.extended) {
+            buf.clear();
+            match self.can_json.decoded(buf, at, &f.data) {
+                Ok(true) => self.can_decoded.log_with_meta(buf, meta),
+                Ok(false) => {}
+                Err(e) => self.note_error(format!("encoding {}: {e}", topics::CAN_DECODED)),
+            }
         }
         self.summary.can_frames += 1;
     }
@@ -1066,6 +1228,145 @@ impl Writer {
             Entry::Plan(t, planned) => self.plan(t, &planned),
             Entry::Fix(t, reading) => self.reading(t, &reading),
             Entry::Pose(t, [x, y, theta]) => self.base_link(t, x, y, theta),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan of `n` beams with ranges, a dropout and no return among them.
+    fn scan(n: u32) -> LaserFrame {
+        let mut f = LaserFrame {
+            count: n,
+            stamp_ns: 1_700_000_000_123_456_789,
+            angle_min: -2.35,
+            angle_increment: 0.0087,
+            range_max: 20.0,
+            ..LaserFrame::default()
+        };
+        for i in 0..n as usize {
+            f.ranges[i] = 0.5 + i as f32 * 0.37;
+            f.intensities[i] = i as f32;
+        }
+        if n > 2 {
+            f.ranges[1] = f32::NAN;
+            f.ranges[2] = f32::INFINITY;
+        }
+        f
+    }
+
+    #[test]
+    fn scans_are_encoded_as_the_sdk_encodes_a_laser_scan() {
+        for n in [0, 1, 3, 541] {
+            let frame = scan(n);
+            let sdk = LaserScan {
+                timestamp: Some(timestamp(frame.stamp_ns)),
+                frame_id: "laser".to_owned(),
+                pose: None,
+                start_angle: f64::from(frame.angle_min),
+                end_angle: f64::from(frame.angle_max()),
+                ranges: frame.ranges().iter().map(|r| f64::from(*r)).collect(),
+                intensities: frame.intensities().iter().map(|r| f64::from(*r)).collect(),
+            };
+            let mut expected = Vec::new();
+            Encode::encode(&sdk, &mut expected).unwrap();
+            let mut ours = vec![0xAA];
+            encode_scan(&mut ours, &frame).unwrap();
+            assert_eq!(ours[1..], expected[..], "{n} beams");
+        }
+    }
+
+    /// What the recorder wrote per frame before (serde_json maps).
+    fn as_maps(spec: &NetworkSpec, f: &TapFrame) -> (String, Option<String>) {
+        let hex: String = f.data.iter().map(|b| format!("{b:02X}")).collect();
+        let mut raw = json!({
+            "id": f.id,
+            "extended": f.extended,
+            "data": hex,
+            "direction": match f.sent {
+                Some(false) => "tx",
+                Some(true) | None => direction(spec, f.id),
+            },
+        });
+        if let Some(sent) = f.sent {
+            raw["sent"] = sent.into();
+        }
+        if let Some(k) = f.kernel {
+            raw["wall_unix_ns"] = unix_ns(k).into();
+        }
+        let message = (!f.extended)
+            .then(|| u16::try_from(f.id).ok())
+            .flatten()
+            .and_then(|id| spec.message(id));
+        let decoded = match (message, golf_car_can::codec::payload("", &f.data)) {
+            (Some(m), Ok(p)) => {
+                let signals: serde_json::Map<String, serde_json::Value> = m
+                    .decode_all(&p)
+                    .into_iter()
+                    .map(|v| (v.name.to_owned(), v.value.into()))
+                    .collect();
+                Some(json!({ "id": f.id, "message": m.name, "signals": signals }).to_string())
+            }
+            _ => None,
+        };
+        (raw.to_string(), decoded)
+    }
+
+    #[test]
+    fn can_json_is_what_the_maps_gave_for_every_message_and_odd_frames() {
+        let spec = NetworkSpec::from_dbc(golf_car_can::GOLF_CAR_DBC).unwrap();
+        // The recorder's is the one built in; the maps' the DBC read at run time.
+        let can = CanJson::new(golf_car_can::NETWORK.clone()).unwrap();
+        let kernel = Some(SystemTime::UNIX_EPOCH + Duration::from_nanos(1_700_000_000_987_654_321));
+        let mut frames: Vec<TapFrame> = spec
+            .messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| TapFrame {
+                id: u32::from(m.id),
+                extended: false,
+                data: (0..8).map(|b| (b * 37 + i * 101) as u8).collect(),
+                kernel: if i % 2 == 0 { kernel } else { None },
+                sent: [None, Some(true), Some(false)][i % 3],
+            })
+            .collect();
+        assert!(frames.len() > 3, "golf_car.dbc has its messages");
+        for (id, extended, len) in [(0x7FF, false, 8), (0x123, true, 8), (0x1FFF_FFFF, true, 0)] {
+            frames.push(TapFrame {
+                id,
+                extended,
+                data: vec![0xFF; len],
+                kernel: None,
+                sent: None,
+            });
+        }
+        // A known message with a short payload: raw only.
+        frames.push(TapFrame {
+            data: vec![1, 2],
+            ..frames[0].clone()
+        });
+        for f in &frames {
+            let (raw, decoded) = as_maps(&spec, f);
+            let at = can.position(f.id);
+            let direction = match f.sent {
+                Some(false) => "tx",
+                _ => can.direction(at),
+            };
+            let mut buf = Vec::new();
+            CanJson::raw(&mut buf, f, direction);
+            assert_eq!(String::from_utf8(buf).unwrap(), raw);
+            let mut buf = Vec::new();
+            let written = match at.filter(|_| !f.extended) {
+                Some(at) => can.decoded(&mut buf, at, &f.data).unwrap(),
+                None => false,
+            };
+            assert_eq!(
+                written.then(|| String::from_utf8(buf).unwrap()),
+                decoded,
+                "{f:?}"
+            );
         }
     }
 }

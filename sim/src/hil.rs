@@ -368,6 +368,8 @@ pub struct HilOptions {
     pub isolate: Option<String>,
     /// Record the run into `results` (see [`crate::record`]).
     pub record: bool,
+    /// Draw the run into `results` (figure.svg, figure.png).
+    pub figures: bool,
     /// Have the controller started here record its own ports into
     /// `results`/[`CONTROLLER_LOG_DIR`](crate::record::CONTROLLER_LOG_DIR).
     pub controller_log: bool,
@@ -506,7 +508,7 @@ pub fn run_scenario(
             sc,
             end,
             config.perception.detection_radius,
-            &options.results,
+            (&options.results, options.figures),
             measured,
         )?;
         Ok((verdict, outcome))

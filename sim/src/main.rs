@@ -196,6 +196,10 @@ struct SuiteArgs {
     /// --results.
     #[arg(long)]
     record: bool,
+    /// With --hil: do not draw each run (figure.svg, figure.png in its folder). SIL
+    /// runs of a suite write no per-run files but their recordings (--record).
+    #[arg(long, requires = "hil")]
+    no_figures: bool,
     /// Run every scenario (and grid point) with this many seeds, 1 to 100000: the
     /// scenario's own, then seeds derived from it.
     #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
@@ -234,7 +238,10 @@ struct RunArgs {
     /// sim.time_limit_s).
     #[arg(long, value_parser = number(0.001, 86_400.0, "seconds"))]
     time_limit: Option<f64>,
-    /// Directory for verdict.json, trace.json, figure.svg and figure.png.
+    /// Directory for the run's results: verdict.json, trace.json, training.csv,
+    /// figure.svg and figure.png (not with --no-figures), and the recording run.mcap,
+    /// bus.log and gps.nmea (not with --no-record); HIL adds controller.toml,
+    /// controller-trace.jsonl and wires.json. See docs/simulator.md.
     #[arg(long, default_value = "results")]
     results: PathBuf,
     /// Start this controller binary with the wire locations (HIL); see
@@ -293,6 +300,10 @@ struct RunArgs {
     /// results directory; see docs/recording.md).
     #[arg(long)]
     no_record: bool,
+    /// Do not draw the run (by default figure.svg and figure.png go into the results
+    /// directory); the verdict and the traces are written all the same.
+    #[arg(long)]
+    no_figures: bool,
     /// SIL only: at most this many times faster than real time (1: real time), 0.01
     /// to 10000; for watching a run as it goes, or stopping it midway.
     #[arg(long, value_parser = number(0.01, 10_000.0, "times real time"))]
@@ -678,7 +689,7 @@ fn run_sil(
         sc,
         end,
         cfg.perception.detection_radius,
-        &args.results,
+        (&args.results, !args.no_figures),
         |_| {},
     )?;
     eprintln!(
@@ -744,6 +755,7 @@ fn hil_options(sc: &Scenario, args: &RunArgs, live: Option<Arc<LiveView>>) -> Hi
         results: args.results.clone(),
         status_every: args.status_every,
         record: !args.no_record,
+        figures: !args.no_figures,
         controller_log: args.controller_log,
         live,
         rt_priority: args.rt_priority,
@@ -784,6 +796,7 @@ fn run_suite(args: SuiteArgs) -> Result<ExitCode> {
         isolate: args.isolate,
         lockstep: args.lockstep,
         record: args.record,
+        figures: !args.no_figures,
         results: &args.results,
         stop: &stop,
     };
@@ -883,6 +896,8 @@ struct HilSuite<'a> {
     lockstep: bool,
     /// Record each run (`--record`).
     record: bool,
+    /// Draw each run (not `--no-figures`).
+    figures: bool,
     /// The suite's results folder; each run's go in a folder of its own in it.
     results: &'a std::path::Path,
     /// Raised by Ctrl-C and SIGTERM.
@@ -920,6 +935,7 @@ impl HilSuite<'_> {
             results: self.results.join(&slug),
             status_every: 1.0,
             record: self.record,
+            figures: self.figures,
             controller_log: false,
             live: None,
             rt_priority: realtime::DEFAULT_PRIORITY,

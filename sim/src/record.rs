@@ -347,7 +347,7 @@ impl<T: BusTap> Recording<T> {
         if let Err(e) = self.tap.drain(&mut self.frames) {
             self.recorder.w.note_error(format!("the CAN tap: {e}"));
         }
-        for f in std::mem::take(&mut self.frames) {
+        for f in self.frames.drain(..) {
             self.recorder.can(t, &f);
         }
         self.recorder.world(t, &sim.vehicle);

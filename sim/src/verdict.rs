@@ -305,9 +305,6 @@ pub struct RunEnd<'a> {
     pub trace: Option<&'a Trace>,
 }
 
-/// Judge a finished run of `scenario` (HIL or SIL alike), let `measured` add what
-/// only the mode knows (the HIL latency figures and wire statistics), and write the
-/// results into `dir` (see [`write_results`]).
 /// Why an ECU that never enabled did not, from what its commands asked
 /// ([`crate::ecu::safety::EnableRefusals`]); `None` when it was enabled at some time, or
 /// when no command asked it to.
@@ -339,11 +336,14 @@ pub fn never_enabled(r: &crate::ecu::safety::EnableRefusals) -> Option<String> {
     (!why.is_empty()).then(|| why.join("; "))
 }
 
+/// Judge a finished run of `scenario` (HIL or SIL alike), let `measured` add what
+/// only the mode knows (the HIL latency figures and wire statistics), and write the
+/// results into `dir` (see [`write_results`]; the figure when `figures`).
 pub fn judge_and_write(
     scenario: &Scenario,
     end: RunEnd<'_>,
     detection_radius: f64,
-    dir: &Path,
+    (dir, figures): (&Path, bool),
     measured: impl FnOnce(&mut Verdict),
 ) -> Result<Verdict, ResultsError> {
     let mut verdict = Verdict::judge(end.mode, scenario, end.report, end.trace);
@@ -354,20 +354,21 @@ pub fn judge_and_write(
         &verdict,
         end.driven,
         end.trace,
-        detection_radius,
+        figures.then_some(detection_radius),
     )?;
     Ok(verdict)
 }
 
-/// Write `verdict.json`, `trace.json` and `training.csv` (when there is a trace),
-/// `figure.svg` and `figure.png` into `dir`.
+/// Write `verdict.json`, `trace.json` and `training.csv` (when there is a trace)
+/// into `dir`, and `figure.svg` and `figure.png` when given the controller's
+/// detection radius to draw (`None`: `--no-figures`).
 pub fn write_results(
     dir: &Path,
     scenario: &Scenario,
     verdict: &Verdict,
     driven: &[(f64, VehicleState)],
     trace: Option<&Trace>,
-    detection_radius: f64,
+    figure_detection_radius: Option<f64>,
 ) -> Result<(), ResultsError> {
     std::fs::create_dir_all(dir).map_err(|source| ResultsError::Write {
         path: dir.display().to_string(),
@@ -382,6 +383,9 @@ pub fn write_results(
         // The follower's inputs and commands, for `ugv-controller anfis train`.
         write(&dir.join("training.csv"), &t.training_csv())?;
     }
+    let Some(detection_radius) = figure_detection_radius else {
+        return Ok(());
+    };
     let plans: Vec<PlannedPath> = trace
         .map(|t| {
             t.plans
