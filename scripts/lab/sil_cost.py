@@ -148,7 +148,8 @@ def ensure_venv(venv):
     py = venv / "bin" / "python"
     if not py.exists():
         run([sys.executable, "-m", "venv", venv])
-    have = subprocess.run([py, "-c", "import irsim, importlib.metadata as m; print(m.version('ir-sim'))"],
+    # importlib.metadata only: importing irsim prints matplotlib backend notes on stdout.
+    have = subprocess.run([py, "-c", "import importlib.metadata as m; print(m.version('ir-sim'))"],
                           capture_output=True, text=True)
     if have.returncode != 0 or not have.stdout.startswith("2.12."):
         idx = subprocess.run([py, "-m", "pip", "index", "versions", "ir-sim"], capture_output=True, text=True)
@@ -179,8 +180,10 @@ def rtf(args, binary, out):
     t_sim = sim_seconds(res)
     irs = f"MPLBACKEND=Agg {shlex.quote(str(py))} {shlex.quote(str(runner))} {shlex.quote(str(world))} {t_sim}"
     probe = run(["bash", "-c", irs])
-    print(f"IR-SIM {version}: {probe.stdout.strip()}", file=sys.stderr)
-    m = re.search(r"= ([0-9.]+) s simulated", probe.stdout)
+    # IR-SIM prints matplotlib backend notes on stdout; the runner's line is the last.
+    probe_line = probe.stdout.strip().splitlines()[-1] if probe.stdout.strip() else ""
+    print(f"IR-SIM {version} probe: {probe_line}", file=sys.stderr)
+    m = re.search(r"= ([0-9.]+) s simulated", probe_line)
     t_irs = float(m.group(1)) if m else die(f"unexpected runner output: {probe.stdout}")
     print(f"load average before: {loadavg()}", file=sys.stderr)
     pairs, steps_rtf = [], []
@@ -209,7 +212,7 @@ def rtf(args, binary, out):
           f"{med(i_rtf):.2f} ({min(i_rtf):.2f}-{max(i_rtf):.2f}) |")
     print(f"\nugv-sim RTF / IR-SIM RTF per round: median **{med(ratio):.0f}x** "
           f"(min {min(ratio):.0f}, max {max(ratio):.0f}); IR-SIM's stepping loop alone in the probe run: "
-          f"{probe.stdout.strip()}")
+          f"{probe_line}")
 
 
 def main():
