@@ -220,7 +220,7 @@ def main():
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("what", choices=["instructions", "rtf", "all"])
     p.add_argument("--bin", default=str(ROOT / "target" / "release" / "ugv-sim"), help="ugv-sim binary")
-    p.add_argument("--out", default="/tmp/sil-cost", help="results folder (default /tmp/sil-cost)")
+    p.add_argument("--out", default=str(ROOT / "results" / "sil-cost"), help="results folder (default results/sil-cost)")
     p.add_argument("--suite", action="store_true", help="also every scenario of sim/scenarios/suite (slow)")
     p.add_argument("--barn", type=int, default=0, metavar="N", help="also every N-th BARN world (1: all 250)")
     p.add_argument("--barn-worlds", default=str(BARN), help=f"BARN worlds folder (default {BARN})")
