@@ -137,6 +137,9 @@ def instructions(args, binary, out):
             sum_ir += ir
             sum_t += t
             lines.append(f"| {name} | {f.stem} | {t:.2f} | {fmt_m(ir)} | {fmt_m(ir / t)} |")
+            # As it goes too, so a long run interrupted keeps what it measured.
+            print(f"  {f.stem}: {t:.2f} s simulated, {ir} instructions, {fmt_m(ir / t)} per simulated second",
+                  file=sys.stderr, flush=True)
         totals.append(f"| {name} | **total, {len(files)} runs** | {sum_t:.2f} | {fmt_m(sum_ir)} | "
                       f"**{fmt_m(sum_ir / sum_t)}** |")
     print(f"load average after: {loadavg()}", file=sys.stderr)
