@@ -110,6 +110,8 @@ def fmt_m(x):
 
 def instructions(args, binary, out):
     need("valgrind", "install it with `apt-get install -y valgrind`")
+    if args.barn < 0:
+        die("--barn N needs N >= 1 (0, the default, runs no BARN world)")
     groups = [("paper", [PAPER])]
     if args.suite:
         files = sorted(SUITE.glob("*.toml"))
@@ -117,8 +119,6 @@ def instructions(args, binary, out):
             die(f"no scenarios in {SUITE}")
         groups.append(("suite", files))
     if args.barn:
-        if args.barn < 1:
-            die("--barn N needs N >= 1")
         worlds = pathlib.Path(args.barn_worlds)
         files = sorted(worlds.glob("*.toml"))
         if not files:
