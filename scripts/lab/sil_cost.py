@@ -8,10 +8,11 @@
 instructions: callgrind instructions per simulated second of
 `ugv-sim run --sil --no-record SCENARIO --results DIR` under
 `valgrind --tool=callgrind`: the paper scenario (sim/scenarios/paper.toml) always,
-every scenario of sim/scenarios/suite with --suite (71 runs under callgrind: about
-1-2 hours on the 2-core machine, most of it the long routes), every N-th BARN world of
-../shared/benchmarks/barn/worlds with --barn N (--barn 1: all 250, several hours;
---barn 50: 5 worlds, about 5 minutes). Simulated seconds are `time` in each run's
+every scenario of sim/scenarios/suite with --suite (71 runs, about 970 simulated
+seconds, under callgrind: estimated 2-4 hours on the shared 2-core machine), every N-th
+BARN world of ../shared/benchmarks/barn/worlds with --barn N (--barn 50: 5 worlds,
+over 30 minutes under load, as a world the car struggles in runs to its 8 x OT limit
+under callgrind; --barn 1: all 250, a day). Simulated seconds are `time` in each run's
 verdict.json; instructions are the `totals:` line of the callgrind output. Prints a
 markdown table per item and the totals per group (instructions over simulated
 seconds summed). Instructions do not depend on the machine's load.
