@@ -257,18 +257,13 @@ fn push_hex(out: &mut Vec<u8>, n: u32, width: u32) {
     }
 }
 
-/// A byte as two upper-case hex digits.
-pub fn hex_byte(b: u8) -> [u8; 2] {
-    [
-        HEX_DIGITS[usize::from(b >> 4)],
-        HEX_DIGITS[usize::from(b & 0xF)],
-    ]
-}
-
 /// Append `bytes` as hex, two upper-case digits each.
 pub fn push_hex_bytes(out: &mut Vec<u8>, bytes: &[u8]) {
     for b in bytes {
-        out.extend_from_slice(&hex_byte(*b));
+        out.extend_from_slice(&[
+            HEX_DIGITS[usize::from(b >> 4)],
+            HEX_DIGITS[usize::from(b & 0xF)],
+        ]);
     }
 }
 

@@ -508,7 +508,8 @@ pub fn run_scenario(
             sc,
             end,
             config.perception.detection_radius,
-            (&options.results, options.figures),
+            &options.results,
+            options.figures,
             measured,
         )?;
         Ok((verdict, outcome))

@@ -689,7 +689,8 @@ fn run_sil(
         sc,
         end,
         cfg.perception.detection_radius,
-        (&args.results, !args.no_figures),
+        &args.results,
+        !args.no_figures,
         |_| {},
     )?;
     eprintln!(

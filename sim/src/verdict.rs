@@ -343,7 +343,8 @@ pub fn judge_and_write(
     scenario: &Scenario,
     end: RunEnd<'_>,
     detection_radius: f64,
-    (dir, figures): (&Path, bool),
+    dir: &Path,
+    figures: bool,
     measured: impl FnOnce(&mut Verdict),
 ) -> Result<Verdict, ResultsError> {
     let mut verdict = Verdict::judge(end.mode, scenario, end.report, end.trace);

@@ -106,7 +106,9 @@ impl Lockstep {
         wait: impl Fn(&ClockLeader, Duration) -> Result<Option<ClockAck>, ClockError>,
     ) -> Result<Answer, HilError> {
         let mut deadline = Instant::now() + bound;
-        let mut cpu = controller.as_deref().and_then(ControllerProcess::cpu_ticks);
+        // The controller's CPU time once the answer is slow to come (read then, not at
+        // every tick): whether it works while the simulator waits.
+        let mut cpu = None;
         let mut extended = 0;
         loop {
             let slice = Duration::from_millis(50);
@@ -118,11 +120,13 @@ impl Lockstep {
             {
                 return Ok(Answer::Gone(format!("the controller exited ({status})")));
             }
+            let cpu_now = || controller.as_deref().and_then(ControllerProcess::cpu_ticks);
+            let before = *cpu.get_or_insert_with(cpu_now);
             if Instant::now() >= deadline {
-                let used = controller.as_deref().and_then(ControllerProcess::cpu_ticks);
-                let busy = used.is_some() && used > cpu;
+                let used = cpu_now();
+                let busy = used.is_some() && used > before;
                 if busy && extended < BUSY_BOUNDS {
-                    (cpu, extended, deadline) = (used, extended + 1, deadline + bound);
+                    (cpu, extended, deadline) = (Some(used), extended + 1, deadline + bound);
                     continue;
                 }
                 let waited = bound.as_secs() * u64::from(extended + 1);
