@@ -41,6 +41,9 @@ pub struct CircleMeasurement {
     pub points: usize,
     /// Index of the cluster in [`Detections::clusters`].
     pub cluster: usize,
+    /// The cluster runs to the first or the last beam of the scan: the edge of the
+    /// field of view may cut the object.
+    pub truncated: bool,
 }
 
 /// A straight wall piece (world frame), p0 at the end of the lower beam index.
@@ -100,6 +103,15 @@ impl View {
     /// from `laser` (world frame): within the range, and some beam towards it within
     /// the field of view returned no nearer than the disc (less a slack).
     pub fn sees(&self, laser: &Pose2, x: f64, y: f64, r: f64) -> bool {
+        self.shows(laser, x, y, r, 1)
+    }
+
+    /// Whether at least `beams` beams of this scan taken from `laser` (world frame)
+    /// reach the disc (x, y, r) in the world frame ([`View::sees`] with one): a disc
+    /// at the edge of the field of view that one beam grazes would give a cluster too
+    /// small to detect, so its absence from the detections is no evidence that it has
+    /// gone.
+    pub fn shows(&self, laser: &Pose2, x: f64, y: f64, r: f64, beams: usize) -> bool {
         let (dx, dy) = (x - laser.x, y - laser.y);
         let d = (dx * dx + dy * dy).sqrt();
         if d.is_nan() || d - r > self.range_max {
@@ -121,7 +133,9 @@ impl View {
         let near = d - r - OCCLUSION_SLACK;
         (lo as usize..=hi as usize)
             .filter_map(|k| self.ranges.get(k))
-            .any(|&range| f64::from(range) >= near)
+            .filter(|&&range| f64::from(range) >= near)
+            .nth(beams.saturating_sub(1))
+            .is_some()
     }
 
     /// What this scan, taken from `laser` (world frame), saw at the world point `p`:
@@ -274,9 +288,20 @@ pub(super) fn detect_with(
     let origin = [laser.x, laser.y];
     let mut circles = Vec::new();
     let mut segments = Vec::new();
+    let last_beam = scan.ranges.len().saturating_sub(1);
     for (index, range) in clusters.iter().enumerate() {
         let world: Vec<[f64; 2]> = points[range.clone()].iter().map(|p| p.world).collect();
+        let from = circles.len();
         classify(&world, origin, index, cfg, &mut circles, &mut segments);
+        let edge = |p: Option<&ScanPoint>| p.is_some_and(|p| p.beam == 0 || p.beam == last_beam);
+        if edge(points.get(range.start))
+            || edge(range.end.checked_sub(1).and_then(|k| points.get(k)))
+        {
+            circles
+                .iter_mut()
+                .skip(from)
+                .for_each(|c| c.truncated = true);
+        }
     }
     Ok(Detections {
         stamp: scan.stamp,
@@ -320,6 +345,7 @@ fn classify(
                 rms: c.rms,
                 points: n,
                 cluster,
+                truncated: false,
             });
             return;
         }
@@ -460,6 +486,7 @@ fn blob(
         rms: 0.0,
         points: pts.len(),
         cluster,
+        truncated: false,
     })
 }
 

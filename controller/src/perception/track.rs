@@ -156,9 +156,6 @@ struct PointTrack {
     measured: [f64; 2],
     /// The stamp of the last scan that measured it.
     last_hit: f64,
-    /// Moving, out of sight and carried on at its velocity (`moving_memory_s`) on
-    /// the latest scan.
-    coasting: bool,
 }
 
 impl PointTrack {
@@ -191,7 +188,6 @@ impl PointTrack {
             moving_since: None,
             measured: m.centre,
             last_hit: stamp,
-            coasting: false,
         };
         let r = track.measurement_covariance(m, cfg);
         track.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&r);
@@ -236,7 +232,16 @@ impl PointTrack {
             .then_some(d)
     }
 
-    fn update(&mut self, m: &CircleMeasurement, cfg: &PerceptionConfig) {
+    /// Corrects the track with `m`; false when `m` only shows the object is there.
+    fn update(&mut self, m: &CircleMeasurement, cfg: &PerceptionConfig) -> bool {
+        if m.truncated && m.kind == ObstacleKind::Unknown && self.life.confirmed {
+            // A blob cut by the edge of the field of view: its centre lies where the
+            // visible part ends, not where the object is (a walker leaving the view
+            // seemed to speed up and turn). It shows the object is there; the track
+            // coasts on as predicted, its motion held.
+            self.life.record(true, cfg);
+            return false;
+        }
         if let Some((y, s_inv, _, _)) = self.innovation(m, cfg) {
             let r = self.measurement_covariance(m, cfg);
             let k = self.cov * H.transpose() * s_inv;
@@ -260,6 +265,7 @@ impl PointTrack {
             self.radius_var *= 1.0 - gain;
         }
         self.life.record(true, cfg);
+        true
     }
 
     /// The filter's velocity passes the dead band and the significance test with
@@ -832,14 +838,20 @@ impl Perception {
         }
         let candidates = gate(&self.tracks, &detections.circles, cfg);
         let track_of = assign(candidates, self.tracks.len(), detections.circles.len());
+        // Which tracks this scan updated, and which hold their motion unjudged: seen
+        // only at the edge of the view, or out of sight.
         let mut updated = vec![false; self.tracks.len()];
+        let mut held = vec![false; self.tracks.len()];
         for (m, t) in detections.circles.iter().zip(&track_of) {
             if let Some(ti) = t {
                 if let Some(track) = self.tracks.get_mut(*ti) {
-                    track.update(m, cfg);
+                    let corrected = track.update(m, cfg);
                     track.last_hit = stamp;
-                    if still.get(m.cluster) == Some(&true) {
+                    if corrected && still.get(m.cluster) == Some(&true) {
                         track.hold_still();
+                    }
+                    if let Some(h) = held.get_mut(*ti) {
+                        *h = !corrected;
                     }
                 }
                 if let Some(u) = updated.get_mut(*ti) {
@@ -848,17 +860,23 @@ impl Perception {
             }
         }
         // The local map: a confirmed static track the scan could not have seen is
-        // remembered, not missed, while within `memory_radius`.
-        let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
+        // remembered, not missed, while within `memory_radius`. Seen means enough
+        // beams to make a cluster (`min_points`) reach the inner half of its disc:
+        // beams grazing its edge (a walker leaving the field of view) may miss it or
+        // make a cluster too small to keep, so their silence is no miss.
+        let sees = |x: f64, y: f64, r: f64| {
+            detections
+                .view
+                .shows(&detections.laser, x, y, 0.5 * r, cfg.min_points)
+        };
         let out_of_sight_nearby = |x: f64, y: f64, r: f64| {
             distance([x, y], [pose.x, pose.y]) - r <= cfg.memory_radius && !sees(x, y, r)
         };
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
             life.memorable(cfg) && !moving && out_of_sight_nearby(x, y, r)
         };
-        for (t, u) in self.tracks.iter_mut().zip(&updated) {
+        for ((t, u), h) in self.tracks.iter_mut().zip(&updated).zip(&mut held) {
             let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
-            t.coasting = false;
             if *u {
                 continue;
             }
@@ -869,7 +887,7 @@ impl Perception {
             {
                 // Moving out of sight: it goes on where its velocity takes it (the
                 // prediction above), its motion held as last measured.
-                t.coasting = true;
+                *h = true;
             } else if remembered(t.state[0], t.state[1], t.radius, &t.life, moving) {
                 // Static: the filter's velocity below the dead band is noise, and with
                 // no measurement to correct it the remembered position would drift.
@@ -879,6 +897,9 @@ impl Perception {
                 t.life.record(false, cfg);
             }
         }
+        for (t, _) in self.tracks.iter_mut().zip(&held).filter(|(_, h)| !**h) {
+            t.note_motion(stamp, cfg);
+        }
         self.tracks.retain(|t| {
             !t.life.dead(cfg)
                 && (cfg.memory_radius <= 0.0
@@ -886,9 +907,6 @@ impl Perception {
                         <= cfg.memory_radius
                     || sees(t.state[0], t.state[1], t.radius))
         });
-        for t in self.tracks.iter_mut().filter(|t| !t.coasting) {
-            t.note_motion(stamp, cfg);
-        }
         for (m, t) in detections.circles.iter().zip(&track_of) {
             // A measurement centred inside a confirmed track's circle is a fragment of
             // that object (a partial view, a cluster split by dropouts), not a new one.
@@ -1321,6 +1339,7 @@ mod tests {
             rms: 0.01,
             points: 8,
             cluster: 0,
+            truncated: false,
         };
         // A field of posts 0.9-2.5 m apart, tracks a little off some of them, and
         // measurements that coincide in x or y.
