@@ -1434,6 +1434,33 @@ mod tests {
     }
 
     #[test]
+    fn a_goal_the_car_has_turned_past_is_no_path_not_a_planner_error() {
+        // Round a hedge's end on a switchback, the car came past the end of a
+        // problem's frame: t_f = t_k + span / pace fell before t_k, the planner refused
+        // the problem and the car stopped for good ("planner: t_f must be later").
+        let cfg = east_to(40.0);
+        let nav = Navigator::new(&cfg).expect("navigator");
+        let pose = car_at(5.0, 0.0, 0.0, 2.0);
+        for moving in [false, true] {
+            let walker = planner::Obstacle {
+                vx: 0.7,
+                ..post(20.0, 6.0, 0.3)
+            };
+            let obstacles: Vec<planner::Obstacle> = if moving { vec![walker] } else { vec![] };
+            let mut req = nav.request(0.5, &pose, &obstacles);
+            assert_eq!(req.pacing.is_some(), moving);
+            req.problem.goal.x = req.problem.state.x - 1.0;
+            req.detours.clear();
+            req.passages.clear();
+            req.manoeuvre = None;
+            match solve(&req).result {
+                Ok((path, _)) => assert!(path.is_none(), "a path to a goal behind the car"),
+                Err(e) => panic!("moving {moving}: {e}"),
+            }
+        }
+    }
+
+    #[test]
     fn a_replanning_that_finds_no_path_keeps_the_path_being_followed_while_it_holds() {
         let cfg = east_to(40.0);
         let post_beside = post(10.0, 4.0, 0.5);

@@ -672,6 +672,12 @@ fn solve_towards(
         (f, statics)
     });
     let clear = |t: &Trajectory| fits.as_ref().is_none_or(|(f, o)| f.path_clear(t, o));
+    if p.goal.x <= p.state.x {
+        // The car has turned past the goal (round a hedge's end towards the route's
+        // way back): no polynomial leads there (x_f must lie ahead of x_k), so the
+        // problem has no path; it is no planner error that stops the car.
+        return Ok(record(req.time, frame, None, req.pacing.is_some()));
+    }
     let Some(pacing) = &req.pacing else {
         let chosen = solve_one(p, req.steer_limit, &clear)?;
         return Ok(record(req.time, frame, chosen, false));
