@@ -2372,6 +2372,48 @@ mod tests {
     }
 
     #[test]
+    fn round_a_corner_with_trees_inside_the_local_goal_is_in_sight_and_near_the_route() {
+        // A 90-degree left corner at (30, 0), trees 3.5 and 6.5 m in from its legs. A
+        // local goal far up the next leg pulled the path into the trees; one further on
+        // still, its line clear inside them, took the car 12 m off the route.
+        let cfg = route_to(&[(30.0, 0.0)], (30.0, 30.0));
+        let nav = Navigator::new(&cfg).expect("navigator");
+        let trees = [post(24.5, 3.5, 0.4), post(27.0, 6.5, 0.4)];
+        let wide = nav.wide();
+        for s in [8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0, 22.0, 24.0, 26.0] {
+            let goal = search::local_goal(&nav.route, &cfg.planner, &wide, s, &trees);
+            let here = nav.route.at(s);
+            let (dx, dy) = (goal.x - here.x, goal.y - here.y);
+            let length = dx.hypot(dy);
+            // The line from the route at s to the goal: clear of the trees by the
+            // planning circle, and passing within 4 m of the corner.
+            for t in &trees {
+                let along =
+                    (((t.x - here.x) * dx + (t.y - here.y) * dy) / length.powi(2)).clamp(0.0, 1.0);
+                let (cx, cy) = (here.x + along * dx, here.y + along * dy);
+                let gap = (t.x - cx).hypot(t.y - cy) - t.radius;
+                assert!(
+                    gap > wide.r0,
+                    "s {s}: goal ({:.1}, {:.1}) hidden, {gap:.2} m",
+                    goal.x,
+                    goal.y
+                );
+            }
+            let cut = if goal.s > 30.0 && s < 30.0 {
+                ((30.0 - here.x) * dy - (0.0 - here.y) * dx).abs() / length
+            } else {
+                0.0
+            };
+            assert!(
+                cut < 4.0,
+                "s {s}: goal ({:.1}, {:.1}) cuts the corner by {cut:.1} m",
+                goal.x,
+                goal.y
+            );
+        }
+    }
+
+    #[test]
     fn a_route_whose_goal_lies_behind_its_start_is_driven_before_it_arrives() {
         // A lap round a building ending 12 m behind the start on the line it began on,
         // and a switchback (out 34 m, back 8 m over). Judged by the last leg alone the

@@ -5,6 +5,7 @@
 //! by their stated cost.
 
 use super::footprint::Footprint;
+use super::frame::wrap;
 use crate::config::PlannerConfig;
 use crate::planner::Obstacle;
 use crate::route::{Route, RoutePoint};
@@ -63,8 +64,10 @@ pub(super) const MAX_LOCAL_HEADING: f64 = 0.5;
 
 /// The local goal on `route` from progress `s`: `horizon_m` further along the route
 /// (the goal once that near), moved on along the route, or else back towards the car,
-/// until it and the route before it are clear ([`Clearance`]); the nominal one when
-/// none is (the planner then finds no path, and the car stops).
+/// until it and the route before it are clear ([`Clearance`]) and, round a corner, the
+/// straight line to it too (back towards the car first when the nominal one's is
+/// not); the nominal one when none is (the planner then finds no path, and the car
+/// stops).
 pub(super) fn local_goal(
     route: &Route,
     pc: &PlannerConfig,
@@ -83,14 +86,63 @@ pub(super) fn local_goal(
                 .map(|k| route.at((g.s - k as f64 * LOCAL_GOAL_STEP).max(s)))
                 .all(|p| clear_of(&p, obstacles, clearance.r0))
     };
+    // Round a corner, the goal is one the car can see: the straight line to it from
+    // the route at `s` clear too. A goal far along the next leg pulled the path across
+    // the corner's inside, into the trees standing there, and the car came to the
+    // corner heading away from it; one further on still, whose line passes inside the
+    // trees, took the car 12 m off the route. So a nominal goal out of sight is
+    // brought nearer, towards the corner, before one further on is tried.
+    let here = route.at(s);
+    let in_sight =
+        |g: &RoutePoint| !turns(route, s, g.s) || chord_clear(&here, g, obstacles, clearance.r0);
     let steps = ((end - nominal) / LOCAL_GOAL_STEP).ceil() as usize;
     let back = ((pc.horizon_m - pc.horizon_min_m).max(0.0) / LOCAL_GOAL_STEP) as usize;
     let on = (0..=steps).map(|i| (nominal + i as f64 * LOCAL_GOAL_STEP).min(end));
-    let nearer = (1..=back).map(|i| nominal - i as f64 * LOCAL_GOAL_STEP);
-    on.chain(nearer.filter(|&g| g > s))
+    let nearer = (1..=back)
+        .map(|i| nominal - i as f64 * LOCAL_GOAL_STEP)
+        .filter(|&g| g > s);
+    let order: Vec<f64> = if in_sight(&route.local_goal(nominal)) {
+        on.chain(nearer).collect()
+    } else {
+        nearer.chain(on).collect()
+    };
+    order
+        .into_iter()
         .map(|g| route.local_goal(g))
-        .find(clear)
+        .find(|g| clear(g) && in_sight(g))
         .unwrap_or_else(|| route.local_goal(nominal))
+}
+
+/// A route heading that turns by more than this from progress `s` is a corner for
+/// [`local_goal`], radians.
+const CORNER_TURN: f64 = 0.5;
+
+/// Whether the route turns a corner between `s0` and `s1`: its heading somewhere
+/// between them more than [`CORNER_TURN`] from its heading at `s0`.
+fn turns(route: &Route, s0: f64, s1: f64) -> bool {
+    let h0 = route.at(s0).heading;
+    let n = ((s1 - s0) / LOCAL_GOAL_STEP).ceil().max(0.0) as usize;
+    (1..=n).any(|k| {
+        let h = route.at((s0 + k as f64 * LOCAL_GOAL_STEP).min(s1)).heading;
+        wrap(h - h0).abs() > CORNER_TURN
+    })
+}
+
+/// Whether the straight line from `a` to `b` keeps `r0` clear of every static obstacle
+/// (checked every [`LOCAL_GOAL_STEP`]).
+fn chord_clear(a: &RoutePoint, b: &RoutePoint, obstacles: &[Obstacle], r0: f64) -> bool {
+    let n = ((b.x - a.x).hypot(b.y - a.y) / LOCAL_GOAL_STEP)
+        .ceil()
+        .max(1.0) as usize;
+    (0..=n).all(|k| {
+        let f = k as f64 / n as f64;
+        let p = RoutePoint {
+            x: a.x + f * (b.x - a.x),
+            y: a.y + f * (b.y - a.y),
+            ..*a
+        };
+        clear_of(&p, obstacles, r0)
+    })
 }
 
 /// `base` moved `shift` metres to its left (negative: right).
