@@ -10,6 +10,7 @@
 use super::{Beam, Pose2, Scan};
 use crate::grid::Grid;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// Side of a cell, metres.
 pub const CELL: f64 = 0.25;
@@ -33,14 +34,43 @@ const HIT_CAP: u8 = 12;
 /// A chunk's hit evidence, one byte a cell.
 type Evidence = [[u8; CHUNK as usize]; CHUNK as usize];
 
+/// A hash of chunk coordinates (FxHash's step, a multiply and a rotation per word):
+/// the default SipHash cost some 200 instructions a lookup, a ray looks up two or three
+/// chunks. Nothing iterates the maps in an order that matters ([`SeenSpace::hits_in`]
+/// sorts).
+#[derive(Clone, Copy, Debug, Default)]
+struct ChunkHasher(u64);
+
+impl Hasher for ChunkHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn write_i64(&mut self, word: i64) {
+        self.write_u64(word as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type ChunkMap<V> = HashMap<(i64, i64), V, BuildHasherDefault<ChunkHasher>>;
+
 /// The seen space.
 #[derive(Clone, Debug, Default)]
 pub struct SeenSpace {
-    chunks: HashMap<(i64, i64), [u32; CHUNK as usize]>,
+    chunks: Chunks,
     /// Evidence of returns per cell ([`HIT_GAIN`]): what the laser saw of the
     /// obstacles, remembered once they are out of its view (perception's tracks of
     /// them are dropped then).
-    hits: HashMap<(i64, i64), Evidence>,
+    hits: ChunkMap<Evidence>,
 }
 
 /// SeenSpace space over a window of the world, copied out for one search.
@@ -87,7 +117,7 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64
     }
 }
 
-type Chunks = HashMap<(i64, i64), [u32; CHUNK as usize]>;
+type Chunks = ChunkMap<[u32; CHUNK as usize]>;
 
 fn get(chunks: &Chunks, (i, j): (i64, i64)) -> bool {
     chunks
