@@ -75,6 +75,10 @@ pub trait GpsInput {
 /// 8.7 kB, moved out of the port and into the loop without copying it again.
 pub trait LaserInput {
     fn try_recv(&mut self) -> Result<Option<Box<LaserFrame>>, InputError>;
+
+    /// A frame the loop has done with, for the port to fill again (SIL hands it back to
+    /// the simulator's scanner: no new 8.7 kB frame to zero per scan). Dropped by default.
+    fn recycle(&mut self, _frame: Box<LaserFrame>) {}
 }
 
 impl<P: Read + Write> GpsInput for NmeaLink<P> {
@@ -155,11 +159,18 @@ impl GpsInput for MemGps {
 pub struct MemLaser {
     frames: VecDeque<Box<LaserFrame>>,
     lost: Option<String>,
+    /// The last frame the loop has done with ([`LaserInput::recycle`]).
+    spent: Option<Box<LaserFrame>>,
 }
 
 impl MemLaser {
     pub fn push(&mut self, frame: Box<LaserFrame>) {
         self.frames.push_back(frame);
+    }
+
+    /// The last frame the loop has done with, to be written again.
+    pub fn take_spent(&mut self) -> Option<Box<LaserFrame>> {
+        self.spent.take()
     }
 
     /// The service goes away: the next receive reports it lost.
@@ -180,6 +191,10 @@ impl LaserInput for MemLaser {
                 .map(|()| Some(f))
                 .map_err(|e| InputError::Malformed(e.to_string())),
         }
+    }
+
+    fn recycle(&mut self, frame: Box<LaserFrame>) {
+        self.spent = Some(frame);
     }
 }
 
@@ -458,6 +473,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                             w.laser(now, &frame);
                         }
                         self.take_scan(now, &frame);
+                        self.laser.recycle(frame);
                     }
                     Ok(None) => break,
                     Err(e @ InputError::Malformed(_)) => {

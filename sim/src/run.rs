@@ -97,6 +97,8 @@ pub struct Sim<B> {
     gps: Option<GpsDevice>,
     laser: Option<LaserDevice>,
     next_scan: f64,
+    /// A frame the controller has done with, scanned into next ([`Sim::reuse_frame`]).
+    spare_frame: Option<Box<LaserFrame>>,
     outputs: SensorOutput,
     /// The driven path, sampled every 50 ms.
     pub trajectory: Vec<(f64, VehicleState)>,
@@ -184,6 +186,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             gps: None,
             laser: None,
             next_scan: 0.0,
+            spare_frame: None,
             outputs: SensorOutput::default(),
             trajectory: vec![(0.0, vehicle)],
             wind_down: None,
@@ -193,6 +196,12 @@ impl<B: Can + QueueDrops> Sim<B> {
             route: RouteCheck::new(&scenario),
             scenario,
         }
+    }
+
+    /// A laser frame to scan into next instead of a new one: the scan writes every field
+    /// and every beam (those past its count zero), so what it held does not matter.
+    pub fn reuse_frame(&mut self, frame: Box<LaserFrame>) {
+        self.spare_frame = Some(frame);
     }
 
     /// Add the scenario's GPS receiver and laser scanner: each step then leaves their
@@ -308,7 +317,7 @@ impl<B: Can + QueueDrops> Sim<B> {
         {
             let v = &self.vehicle;
             // Written in place into the frame that goes out.
-            let mut scan = Box::<LaserFrame>::default();
+            let mut scan = self.spare_frame.take().unwrap_or_default();
             laser.scan_into(&self.world, now, v.x, v.y, v.theta, &mut scan);
             self.outputs.laser = faults.laser(now, Some(scan));
             self.next_scan = firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());

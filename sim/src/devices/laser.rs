@@ -284,6 +284,37 @@ mod tests {
     }
 
     #[test]
+    fn a_reused_frame_reads_as_a_new_one() {
+        let obstacles = [Obstacle::Circle {
+            x: 5.0,
+            y: 1.0,
+            radius: 0.5,
+            motion: None,
+        }];
+        let world = World::new(&obstacles);
+        let device = || LaserDevice::new(&LaserConfig::default(), &obstacles, 7, 0);
+        let (mut a, mut b) = (device().expect("valid"), device().expect("valid"));
+        let fresh = a.scan(&world, 0.02, 0.0, 0.0, 0.1);
+        let mut reused = Box::new(LaserFrame {
+            version: 0,
+            count: 3,
+            sequence: 99,
+            stamp_ns: 1,
+            angle_min: 1.0,
+            angle_increment: -1.0,
+            time_increment: 9.0,
+            scan_time: 9.0,
+            range_min: 5.0,
+            range_max: 1.0,
+            ranges: [-2.5; firmware_bridge::laser::MAX_BEAMS],
+            intensities: [f32::NAN; firmware_bridge::laser::MAX_BEAMS],
+        });
+        b.scan_into(&world, 0.02, 0.0, 0.0, 0.1, &mut reused);
+        assert!(*reused == fresh, "the reused frame differs");
+        assert!(fresh.ranges[..fresh.count as usize].iter().any(|r| r.is_finite()));
+    }
+
+    #[test]
     fn stamps_are_epoch_plus_sim_time() {
         assert_eq!(unix_ns(1_000_000_000, 0.02), 1_020_000_000);
         assert_eq!(unix_ns(5, -1.0), 0);
