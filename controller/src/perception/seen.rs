@@ -119,35 +119,51 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64
 
 type Chunks = ChunkMap<[u32; CHUNK as usize]>;
 
-fn get(chunks: &Chunks, (i, j): (i64, i64)) -> bool {
+/// log2 of [`CHUNK`]: a cell's chunk and its place in it by shift and mask, as
+/// `div_euclid` and `rem_euclid` by [`CHUNK`] give them (negative cells too).
+const CHUNK_SHIFT: u32 = CHUNK.trailing_zeros();
+const _: () = assert!(CHUNK == 1 << CHUNK_SHIFT);
+
+fn chunk_of((i, j): (i64, i64)) -> (i64, i64) {
+    (i >> CHUNK_SHIFT, j >> CHUNK_SHIFT)
+}
+
+/// A cell's column and row within its chunk.
+fn within((i, j): (i64, i64)) -> (usize, usize) {
+    ((i & (CHUNK - 1)) as usize, (j & (CHUNK - 1)) as usize)
+}
+
+fn get(chunks: &Chunks, cell: (i64, i64)) -> bool {
+    let (u, v) = within(cell);
     chunks
-        .get(&(i.div_euclid(CHUNK), j.div_euclid(CHUNK)))
-        .is_some_and(|c| c[j.rem_euclid(CHUNK) as usize] & (1 << i.rem_euclid(CHUNK)) != 0)
+        .get(&chunk_of(cell))
+        .is_some_and(|c| c[v] & (1 << u) != 0)
 }
 
 impl SeenSpace {
     /// Cells seen free, in the order of a ray or a row (neighbours mostly share a
     /// chunk, looked up once for them): no obstacle remembered there either.
     fn mark_cells(&mut self, cells: &[(i64, i64)]) {
-        let chunk_of = |(i, j): (i64, i64)| (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
-        let mut k = 0;
-        while k < cells.len() {
-            let key = chunk_of(cells[k]);
-            let end = k + cells[k..]
+        let mut rest = cells;
+        while let Some(&first) = rest.first() {
+            let key = chunk_of(first);
+            let n = rest
                 .iter()
-                .take_while(|&&c| chunk_of(c) == key)
-                .count();
+                .position(|&c| chunk_of(c) != key)
+                .unwrap_or(rest.len());
+            let (run, tail) = rest.split_at(n);
             let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
-            for &(i, j) in &cells[k..end] {
-                seen[j.rem_euclid(CHUNK) as usize] |= 1 << i.rem_euclid(CHUNK);
+            for &c in run {
+                let (u, v) = within(c);
+                seen[v] |= 1 << u;
             }
             if let Some(hits) = self.hits.get_mut(&key) {
-                for &(i, j) in &cells[k..end] {
-                    let e = &mut hits[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
-                    *e = e.saturating_sub(PASS_LOSS);
+                for &c in run {
+                    let (u, v) = within(c);
+                    hits[v][u] = hits[v][u].saturating_sub(PASS_LOSS);
                 }
             }
-            k = end;
+            rest = tail;
         }
     }
 
@@ -186,13 +202,13 @@ impl SeenSpace {
     }
 
     /// A beam returned from `(i, j)`: [`HIT_GAIN`] more evidence there.
-    fn returned(&mut self, (i, j): (i64, i64)) {
-        let key = (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
+    fn returned(&mut self, cell: (i64, i64)) {
         let chunk = self
             .hits
-            .entry(key)
+            .entry(chunk_of(cell))
             .or_insert([[0; CHUNK as usize]; CHUNK as usize]);
-        let e = &mut chunk[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
+        let (u, v) = within(cell);
+        let e = &mut chunk[v][u];
         *e = e.saturating_add(HIT_GAIN).min(HIT_CAP);
     }
 
@@ -364,6 +380,19 @@ mod tests {
         assert!(!seen.seen(-1.0, 1.1));
         let w = seen.window([0.0, 0.0], [8.0, 8.0]);
         assert!(w.seen(3.0, 1.1) && !w.seen(-1.0, 1.1) && !w.seen(30.0, 1.1));
+    }
+
+    #[test]
+    fn shift_and_mask_place_cells_as_euclidean_division_does() {
+        for i in -200..200 {
+            let c = (i, 3 - i);
+            assert_eq!(chunk_of(c), (i.div_euclid(CHUNK), (3 - i).div_euclid(CHUNK)));
+            let (u, v) = within(c);
+            assert_eq!(
+                (u as i64, v as i64),
+                (i.rem_euclid(CHUNK), (3 - i).rem_euclid(CHUNK))
+            );
+        }
     }
 
     #[test]
