@@ -272,14 +272,24 @@ impl LaserFrame {
         let bad_intensity = |v: &f32| !(v.is_finite() && *v >= 0.0);
         // Whole slices first, without early exit (the compiler vectorises them); the
         // index only for a frame that has a bad value.
-        if self.ranges().iter().fold(false, |bad, r| bad | bad_range(r))
-            && let Some((index, &value)) = self.ranges().iter().enumerate().find(|(_, r)| bad_range(r))
+        if self
+            .ranges()
+            .iter()
+            .fold(false, |bad, r| bad | bad_range(r))
+            && let Some((index, &value)) =
+                self.ranges().iter().enumerate().find(|(_, r)| bad_range(r))
         {
             return Err(LaserError::BadRange { index, value });
         }
-        if self.intensities().iter().fold(false, |bad, v| bad | bad_intensity(v))
-            && let Some((index, &value)) =
-                self.intensities().iter().enumerate().find(|(_, v)| bad_intensity(v))
+        if self
+            .intensities()
+            .iter()
+            .fold(false, |bad, v| bad | bad_intensity(v))
+            && let Some((index, &value)) = self
+                .intensities()
+                .iter()
+                .enumerate()
+                .find(|(_, v)| bad_intensity(v))
         {
             return Err(LaserError::BadIntensity { index, value });
         }

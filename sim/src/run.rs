@@ -198,10 +198,13 @@ impl<B: Can + QueueDrops> Sim<B> {
         }
     }
 
-    /// A laser frame to scan into next instead of a new one: the scan writes every field
-    /// and every beam (those past its count zero), so what it held does not matter.
-    pub fn reuse_frame(&mut self, frame: Box<LaserFrame>) {
-        self.spare_frame = Some(frame);
+    /// A laser frame to scan into next instead of a new one (if any): the scan writes
+    /// every field and every beam (those past its count zero), so what it held does not
+    /// matter.
+    pub fn reuse_frame(&mut self, frame: Option<Box<LaserFrame>>) {
+        if frame.is_some() {
+            self.spare_frame = frame;
+        }
     }
 
     /// Add the scenario's GPS receiver and laser scanner: each step then leaves their

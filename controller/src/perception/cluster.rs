@@ -19,7 +19,12 @@ pub fn cluster_points(
 ) -> Vec<Range<usize>> {
     let lambda = cfg.breakpoint_lambda_deg.to_radians();
     let noise = cfg.breakpoint_noise_factor * cfg.range_noise_sigma;
-    let gaps = Gaps::new(scan.angle_increment.abs(), lambda, cfg.max_dropout_beams, points.len());
+    let gaps = Gaps::new(
+        scan.angle_increment.abs(),
+        lambda,
+        cfg.max_dropout_beams,
+        points.len(),
+    );
     let mut clusters = Vec::new();
     let mut start = 0;
     for k in 1..=points.len() {
@@ -49,10 +54,7 @@ struct Gaps {
 impl Gaps {
     fn new(step: f64, lambda: f64, max_dropouts: usize, points: usize) -> Gaps {
         let terms = (1..=max_dropouts.saturating_add(1).min(points))
-            .map(|gap| {
-                let dphi = gap as f64 * step;
-                (dphi, dphi.sin(), (lambda - dphi).sin())
-            })
+            .map(|gap| gap_terms(gap, step, lambda))
             .collect();
         Gaps {
             step,
@@ -62,11 +64,16 @@ impl Gaps {
     }
 
     fn terms(&self, gap: usize) -> (f64, f64, f64) {
-        self.terms.get(gap.wrapping_sub(1)).copied().unwrap_or_else(|| {
-            let dphi = gap as f64 * self.step;
-            (dphi, dphi.sin(), (self.lambda - dphi).sin())
-        })
+        self.terms
+            .get(gap.wrapping_sub(1))
+            .copied()
+            .unwrap_or_else(|| gap_terms(gap, self.step, self.lambda))
     }
+}
+
+fn gap_terms(gap: usize, step: f64, lambda: f64) -> (f64, f64, f64) {
+    let dphi = gap as f64 * step;
+    (dphi, dphi.sin(), (lambda - dphi).sin())
 }
 
 fn joins(

@@ -147,23 +147,19 @@ impl SeenSpace {
         let mut rest = cells;
         while let Some(&first) = rest.first() {
             let key = chunk_of(first);
-            let n = rest
-                .iter()
-                .position(|&c| chunk_of(c) != key)
-                .unwrap_or(rest.len());
-            let (run, tail) = rest.split_at(n);
             let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
-            for &c in run {
+            let mut hits = self.hits.get_mut(&key);
+            // One pass over the run of cells in this chunk.
+            let mut n = 0;
+            for &c in rest.iter().take_while(|&&c| chunk_of(c) == key) {
                 let (u, v) = within(c);
                 seen[v] |= 1 << u;
-            }
-            if let Some(hits) = self.hits.get_mut(&key) {
-                for &c in run {
-                    let (u, v) = within(c);
-                    hits[v][u] = hits[v][u].saturating_sub(PASS_LOSS);
+                if let Some(h) = hits.as_deref_mut() {
+                    h[v][u] = h[v][u].saturating_sub(PASS_LOSS);
                 }
+                n += 1;
             }
-            rest = tail;
+            rest = &rest[n..];
         }
     }
 
@@ -386,7 +382,10 @@ mod tests {
     fn shift_and_mask_place_cells_as_euclidean_division_does() {
         for i in -200..200 {
             let c = (i, 3 - i);
-            assert_eq!(chunk_of(c), (i.div_euclid(CHUNK), (3 - i).div_euclid(CHUNK)));
+            assert_eq!(
+                chunk_of(c),
+                (i.div_euclid(CHUNK), (3 - i).div_euclid(CHUNK))
+            );
             let (u, v) = within(c);
             assert_eq!(
                 (u as i64, v as i64),

@@ -313,7 +313,7 @@ impl ActuationWatch {
         self.steering_enabled = r.enabled;
         // Only a moving, enabled steering can move away: the targets' hull (a pass
         // over a second of commands) is needed only then.
-        let moving = r.rate > STEER_RATE_NOISE || r.rate < -STEER_RATE_NOISE;
+        let moving = !(-STEER_RATE_NOISE..=STEER_RATE_NOISE).contains(&r.rate);
         let hull = (r.enabled && !r.r#override && moving)
             .then(|| self.hold.or_else(|| self.steering.hull(now, STEER_WINDOW)))
             .flatten();
@@ -369,7 +369,7 @@ impl ActuationWatch {
         }
         // Only a speed gaining or losing more than SPEED_RISE can move away: the
         // targets' hull (a pass over two seconds of commands) is needed only then.
-        let moving = gain.is_some_and(|g| g > SPEED_RISE || g < -SPEED_RISE);
+        let moving = gain.is_some_and(|g| !(-SPEED_RISE..=SPEED_RISE).contains(&g));
         let hull = (r.enabled && moving)
             .then(|| self.throttle.hull(now, SPEED_WINDOW))
             .flatten();

@@ -723,7 +723,13 @@ mod tests {
                 assert_eq!(out, format!("x{v:0width$}"));
             }
         }
-        for (v, d) in [(0.0, 2), (-12.5, 1), (7.25, 0), (1e6 + 0.001, 3), (-0.004, 2)] {
+        for (v, d) in [
+            (0.0, 2),
+            (-12.5, 1),
+            (7.25, 0),
+            (1e6 + 0.001, 3),
+            (-0.004, 2),
+        ] {
             let p = 10u64.pow(d);
             let units = (f64::abs(v) * p as f64).round() as u64;
             let sign = if v < 0.0 && units > 0 { "-" } else { "" };

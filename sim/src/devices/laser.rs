@@ -311,7 +311,11 @@ mod tests {
         });
         b.scan_into(&world, 0.02, 0.0, 0.0, 0.1, &mut reused);
         assert!(*reused == fresh, "the reused frame differs");
-        assert!(fresh.ranges[..fresh.count as usize].iter().any(|r| r.is_finite()));
+        assert!(
+            fresh.ranges[..fresh.count as usize]
+                .iter()
+                .any(|r| r.is_finite())
+        );
     }
 
     #[test]
