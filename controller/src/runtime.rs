@@ -71,9 +71,14 @@ pub trait GpsInput {
     fn last_read(&self) -> &[u8];
 }
 
-/// The laser port: validated frames, oldest first, never blocking.
+/// The laser port: validated frames, oldest first, never blocking. Boxed: a frame is
+/// 8.7 kB, moved out of the port and into the loop without copying it again.
 pub trait LaserInput {
-    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError>;
+    fn try_recv(&mut self) -> Result<Option<Box<LaserFrame>>, InputError>;
+
+    /// A frame the loop has done with, for the port to fill again (SIL hands it back to
+    /// the simulator's scanner: no new 8.7 kB frame to zero per scan). Dropped by default.
+    fn recycle(&mut self, _frame: Box<LaserFrame>) {}
 }
 
 impl<P: Read + Write> GpsInput for NmeaLink<P> {
@@ -90,13 +95,14 @@ impl<P: Read + Write> GpsInput for NmeaLink<P> {
 }
 
 impl LaserInput for LaserSubscriber {
-    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError> {
-        LaserSubscriber::try_recv(self).map_err(|e| match e {
-            LaserError::Ipc { .. } | LaserError::ServiceName { .. } => {
-                InputError::Lost(e.to_string())
+    fn try_recv(&mut self) -> Result<Option<Box<LaserFrame>>, InputError> {
+        match LaserSubscriber::try_recv(self) {
+            Ok(frame) => Ok(frame.map(Box::new)),
+            Err(e @ (LaserError::Ipc { .. } | LaserError::ServiceName { .. })) => {
+                Err(InputError::Lost(e.to_string()))
             }
-            other => InputError::Malformed(other.to_string()),
-        })
+            Err(other) => Err(InputError::Malformed(other.to_string())),
+        }
     }
 }
 
@@ -153,11 +159,18 @@ impl GpsInput for MemGps {
 pub struct MemLaser {
     frames: VecDeque<Box<LaserFrame>>,
     lost: Option<String>,
+    /// The last frame the loop has done with ([`LaserInput::recycle`]).
+    spent: Option<Box<LaserFrame>>,
 }
 
 impl MemLaser {
     pub fn push(&mut self, frame: Box<LaserFrame>) {
         self.frames.push_back(frame);
+    }
+
+    /// The last frame the loop has done with, to be written again.
+    pub fn take_spent(&mut self) -> Option<Box<LaserFrame>> {
+        self.spent.take()
     }
 
     /// The service goes away: the next receive reports it lost.
@@ -167,7 +180,7 @@ impl MemLaser {
 }
 
 impl LaserInput for MemLaser {
-    fn try_recv(&mut self) -> Result<Option<LaserFrame>, InputError> {
+    fn try_recv(&mut self) -> Result<Option<Box<LaserFrame>>, InputError> {
         if let Some(why) = &self.lost {
             return Err(InputError::Lost(why.clone()));
         }
@@ -175,9 +188,13 @@ impl LaserInput for MemLaser {
             None => Ok(None),
             Some(f) => f
                 .validate()
-                .map(|()| Some(*f))
+                .map(|()| Some(f))
                 .map_err(|e| InputError::Malformed(e.to_string())),
         }
+    }
+
+    fn recycle(&mut self, frame: Box<LaserFrame>) {
+        self.spent = Some(frame);
     }
 }
 
@@ -456,6 +473,7 @@ impl<G: GpsInput, L: LaserInput, B: embedded_can::nb::Can> Runtime<G, L, B> {
                             w.laser(now, &frame);
                         }
                         self.take_scan(now, &frame);
+                        self.laser.recycle(frame);
                     }
                     Ok(None) => break,
                     Err(e @ InputError::Malformed(_)) => {

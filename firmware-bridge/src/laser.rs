@@ -268,14 +268,28 @@ impl LaserFrame {
             });
         }
         // NaN compares false, so `< 0.0` refuses exactly the negative values and -inf.
-        if let Some((index, &value)) = self.ranges().iter().enumerate().find(|(_, r)| **r < 0.0) {
+        let bad_range = |r: &f32| *r < 0.0;
+        let bad_intensity = |v: &f32| !(v.is_finite() && *v >= 0.0);
+        // Whole slices first, without early exit (the compiler vectorises them); the
+        // index only for a frame that has a bad value.
+        if self
+            .ranges()
+            .iter()
+            .fold(false, |bad, r| bad | bad_range(r))
+            && let Some((index, &value)) =
+                self.ranges().iter().enumerate().find(|(_, r)| bad_range(r))
+        {
             return Err(LaserError::BadRange { index, value });
         }
-        if let Some((index, &value)) = self
+        if self
             .intensities()
             .iter()
-            .enumerate()
-            .find(|(_, v)| !(v.is_finite() && **v >= 0.0))
+            .fold(false, |bad, v| bad | bad_intensity(v))
+            && let Some((index, &value)) = self
+                .intensities()
+                .iter()
+                .enumerate()
+                .find(|(_, v)| bad_intensity(v))
         {
             return Err(LaserError::BadIntensity { index, value });
         }

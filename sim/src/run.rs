@@ -97,6 +97,8 @@ pub struct Sim<B> {
     gps: Option<GpsDevice>,
     laser: Option<LaserDevice>,
     next_scan: f64,
+    /// A frame the controller has done with, scanned into next ([`Sim::reuse_frame`]).
+    spare_frame: Option<Box<LaserFrame>>,
     outputs: SensorOutput,
     /// The driven path, sampled every 50 ms.
     pub trajectory: Vec<(f64, VehicleState)>,
@@ -184,6 +186,7 @@ impl<B: Can + QueueDrops> Sim<B> {
             gps: None,
             laser: None,
             next_scan: 0.0,
+            spare_frame: None,
             outputs: SensorOutput::default(),
             trajectory: vec![(0.0, vehicle)],
             wind_down: None,
@@ -192,6 +195,15 @@ impl<B: Can + QueueDrops> Sim<B> {
             bus_frames_seen: 0,
             route: RouteCheck::new(&scenario),
             scenario,
+        }
+    }
+
+    /// A laser frame to scan into next instead of a new one (if any): the scan writes
+    /// every field and every beam (those past its count zero), so what it held does not
+    /// matter.
+    pub fn reuse_frame(&mut self, frame: Option<Box<LaserFrame>>) {
+        if frame.is_some() {
+            self.spare_frame = frame;
         }
     }
 
@@ -308,7 +320,7 @@ impl<B: Can + QueueDrops> Sim<B> {
         {
             let v = &self.vehicle;
             // Written in place into the frame that goes out.
-            let mut scan = Box::<LaserFrame>::default();
+            let mut scan = self.spare_frame.take().unwrap_or_default();
             laser.scan_into(&self.world, now, v.x, v.y, v.theta, &mut scan);
             self.outputs.laser = faults.laser(now, Some(scan));
             self.next_scan = firmware_bridge::clock::next_slot(self.next_scan, now, laser.period());

@@ -169,6 +169,7 @@ pub fn run_sil_outputs(
                 sim.controller_gone(format!("the controller's loop ended ({})", e.describe()));
                 exit = Some(e);
             }
+            sim.reuse_frame(rt.laser_mut().take_spent());
         }
         if let Some(r) = &mut rec {
             r.after_step(now, &sim, Some(rt.controller()));

@@ -19,12 +19,17 @@ pub fn cluster_points(
 ) -> Vec<Range<usize>> {
     let lambda = cfg.breakpoint_lambda_deg.to_radians();
     let noise = cfg.breakpoint_noise_factor * cfg.range_noise_sigma;
-    let step = scan.angle_increment.abs();
+    let gaps = Gaps::new(
+        scan.angle_increment.abs(),
+        lambda,
+        cfg.max_dropout_beams,
+        points.len(),
+    );
     let mut clusters = Vec::new();
     let mut start = 0;
     for k in 1..=points.len() {
         let split = match (points.get(k - 1), points.get(k)) {
-            (Some(a), Some(b)) => !joins(scan, a, b, step, lambda, noise, cfg.max_dropout_beams),
+            (Some(a), Some(b)) => !joins(scan, a, b, &gaps, noise, cfg.max_dropout_beams),
             _ => true,
         };
         if split {
@@ -37,12 +42,45 @@ pub fn cluster_points(
     clusters
 }
 
+/// The breakpoint's angular terms per number of beams between two hits (1 for
+/// neighbours), computed once a scan: `dphi`, `sin(dphi)` and `sin(lambda - dphi)`,
+/// the same values the threshold took per pair of hits.
+struct Gaps {
+    step: f64,
+    lambda: f64,
+    terms: Vec<(f64, f64, f64)>,
+}
+
+impl Gaps {
+    fn new(step: f64, lambda: f64, max_dropouts: usize, points: usize) -> Gaps {
+        let terms = (1..=max_dropouts.saturating_add(1).min(points))
+            .map(|gap| gap_terms(gap, step, lambda))
+            .collect();
+        Gaps {
+            step,
+            lambda,
+            terms,
+        }
+    }
+
+    fn terms(&self, gap: usize) -> (f64, f64, f64) {
+        self.terms
+            .get(gap.wrapping_sub(1))
+            .copied()
+            .unwrap_or_else(|| gap_terms(gap, self.step, self.lambda))
+    }
+}
+
+fn gap_terms(gap: usize, step: f64, lambda: f64) -> (f64, f64, f64) {
+    let dphi = gap as f64 * step;
+    (dphi, dphi.sin(), (lambda - dphi).sin())
+}
+
 fn joins(
     scan: &Scan<'_>,
     a: &ScanPoint,
     b: &ScanPoint,
-    step: f64,
-    lambda: f64,
+    gaps: &Gaps,
     noise: f64,
     max_dropouts: usize,
 ) -> bool {
@@ -53,11 +91,11 @@ fn joins(
     if between.clone().any(|i| scan.beam(i) == Beam::NoReturn) {
         return false;
     }
-    let dphi = (b.beam - a.beam) as f64 * step;
-    if dphi >= lambda {
+    let (dphi, sin_dphi, sin_rest) = gaps.terms(b.beam - a.beam);
+    if dphi >= gaps.lambda {
         return false;
     }
-    let threshold = a.range.min(b.range) * dphi.sin() / (lambda - dphi).sin() + noise;
+    let threshold = a.range.min(b.range) * sin_dphi / sin_rest + noise;
     let (dx, dy) = (a.laser[0] - b.laser[0], a.laser[1] - b.laser[1]);
     (dx * dx + dy * dy).sqrt() <= threshold
 }
@@ -100,5 +138,16 @@ mod tests {
         let pts = scan_points(&s.validate().expect("valid"), &p, &p).expect("finite");
         let c = cluster_points(&s, &pts, &cfg);
         assert_eq!(c, vec![0..3, 3..6, 6..10]);
+    }
+
+    #[test]
+    fn the_gap_terms_are_those_of_the_pair_in_and_beyond_the_table() {
+        let (step, lambda) = (0.5f64.to_radians(), 10f64.to_radians());
+        let gaps = Gaps::new(step, lambda, 2, 100);
+        for gap in [1, 2, 3, 7] {
+            let dphi = gap as f64 * step;
+            assert_eq!(gaps.terms(gap), (dphi, dphi.sin(), (lambda - dphi).sin()));
+        }
+        assert_eq!(gaps.terms.len(), 3);
     }
 }

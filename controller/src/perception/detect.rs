@@ -9,7 +9,7 @@ use super::PerceptionError;
 use super::cluster::cluster_points;
 use super::config::PerceptionConfig;
 use super::fit::{CircleFit, LineFit, fit_circle, fit_line, split_and_merge};
-use super::frame::{Pose2, ScanPoint, ValidScan, scan_points};
+use super::frame::{BeamDirections, Pose2, ScanPoint, ValidScan, scan_points_with};
 
 /// What an obstacle is taken for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -272,7 +272,7 @@ pub fn detect(
     cfg: &PerceptionConfig,
 ) -> Result<Detections, PerceptionError> {
     cfg.validate()?;
-    detect_with(scan, mount, pose, cfg)
+    detect_with(scan, mount, pose, cfg, None)
 }
 
 /// [`detect`] with a configuration already checked.
@@ -281,8 +281,9 @@ pub(super) fn detect_with(
     mount: &Pose2,
     pose: &Pose2,
     cfg: &PerceptionConfig,
+    directions: Option<&mut BeamDirections>,
 ) -> Result<Detections, PerceptionError> {
-    let points = scan_points(scan, mount, pose)?;
+    let points = scan_points_with(scan, mount, pose, directions)?;
     let clusters = cluster_points(scan, &points, cfg);
     let laser = pose.compose(mount);
     let origin = [laser.x, laser.y];

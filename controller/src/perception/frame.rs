@@ -200,15 +200,62 @@ pub fn scan_points(
     mount: &Pose2,
     pose: &Pose2,
 ) -> Result<Vec<ScanPoint>, PerceptionError> {
+    scan_points_with(scan, mount, pose, None)
+}
+
+/// Each beam's direction in the laser frame, `(cos, sin)` of [`Scan::beam_angle`],
+/// kept for as long as the scans keep their layout (a scanner's never changes): the
+/// same values [`scan_points`] takes per hit, computed once instead of per scan.
+#[derive(Clone, Debug, Default)]
+pub struct BeamDirections {
+    angle_min: f64,
+    angle_increment: f64,
+    directions: Vec<(f64, f64)>,
+}
+
+impl BeamDirections {
+    /// The directions of `scan`'s beams, computed again if its layout differs.
+    fn of(&mut self, scan: &Scan<'_>) -> &[(f64, f64)] {
+        let same = self.angle_min.to_bits() == scan.angle_min.to_bits()
+            && self.angle_increment.to_bits() == scan.angle_increment.to_bits()
+            && self.directions.len() == scan.ranges.len();
+        if !same {
+            self.angle_min = scan.angle_min;
+            self.angle_increment = scan.angle_increment;
+            self.directions = (0..scan.ranges.len())
+                .map(|beam| direction(scan.beam_angle(beam)))
+                .collect();
+        }
+        &self.directions
+    }
+}
+
+fn direction(angle: f64) -> (f64, f64) {
+    (angle.cos(), angle.sin())
+}
+
+/// [`scan_points`] with the beams' directions kept in `directions` (None: computed
+/// for each hit).
+pub(super) fn scan_points_with(
+    scan: &ValidScan<'_>,
+    mount: &Pose2,
+    pose: &Pose2,
+    directions: Option<&mut BeamDirections>,
+) -> Result<Vec<ScanPoint>, PerceptionError> {
     mount.validate("mount.x", "mount.y", "mount.yaw")?;
     pose.validate("pose.x", "pose.y", "pose.yaw")?;
     let to_vehicle = mount.isometry();
     let to_world = pose.isometry();
+    let kept = directions.map(|d| d.of(scan));
     let mut points = Vec::with_capacity(scan.ranges.len());
     for beam in 0..scan.ranges.len() {
         if let Beam::Hit(range) = scan.beam(beam) {
             let angle = scan.beam_angle(beam);
-            let laser = Point2::new(range * angle.cos(), range * angle.sin());
+            let (c, s) = match kept.and_then(|k| k.get(beam)) {
+                Some(&d) => d,
+                None => direction(angle),
+            };
+            let laser = Point2::new(range * c, range * s);
             let vehicle = to_vehicle * laser;
             let world = to_world * vehicle;
             points.push(ScanPoint {
@@ -236,6 +283,29 @@ mod tests {
         let a = pose.transform(mount.transform(p));
         let b = pose.compose(&mount).transform(p);
         assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn kept_beam_directions_give_the_points_computed_per_hit() {
+        let ranges: Vec<f32> = (0..541).map(|k| 2.0 + (k % 7) as f32).collect();
+        let mount = Pose2::new(1.2, 0.1, 0.05);
+        let pose = Pose2::new(3.0, -1.0, 0.7);
+        let mut kept = BeamDirections::default();
+        // The second layout makes the kept directions be computed again.
+        for angle_min in [-2.356, -2.356, -1.5, -1.5] {
+            let scan = Scan {
+                stamp: 0.0,
+                angle_min,
+                angle_increment: 0.5f64.to_radians(),
+                range_min: 0.05,
+                range_max: 20.0,
+                ranges: &ranges,
+            };
+            let scan = scan.validate().expect("valid");
+            let fresh = scan_points(&scan, &mount, &pose).expect("finite");
+            let with = scan_points_with(&scan, &mount, &pose, Some(&mut kept)).expect("finite");
+            assert_eq!(fresh, with, "angle_min {angle_min}");
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@
 use super::{Beam, Pose2, Scan};
 use crate::grid::Grid;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// Side of a cell, metres.
 pub const CELL: f64 = 0.25;
@@ -33,14 +34,43 @@ const HIT_CAP: u8 = 12;
 /// A chunk's hit evidence, one byte a cell.
 type Evidence = [[u8; CHUNK as usize]; CHUNK as usize];
 
+/// A hash of chunk coordinates (FxHash's step, a multiply and a rotation per word):
+/// the default SipHash cost some 200 instructions a lookup, a ray looks up two or three
+/// chunks. Nothing iterates the maps in an order that matters ([`SeenSpace::hits_in`]
+/// sorts).
+#[derive(Clone, Copy, Debug, Default)]
+struct ChunkHasher(u64);
+
+impl Hasher for ChunkHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn write_i64(&mut self, word: i64) {
+        self.write_u64(word as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type ChunkMap<V> = HashMap<(i64, i64), V, BuildHasherDefault<ChunkHasher>>;
+
 /// The seen space.
 #[derive(Clone, Debug, Default)]
 pub struct SeenSpace {
-    chunks: HashMap<(i64, i64), [u32; CHUNK as usize]>,
+    chunks: Chunks,
     /// Evidence of returns per cell ([`HIT_GAIN`]): what the laser saw of the
     /// obstacles, remembered once they are out of its view (perception's tracks of
     /// them are dropped then).
-    hits: HashMap<(i64, i64), Evidence>,
+    hits: ChunkMap<Evidence>,
 }
 
 /// SeenSpace space over a window of the world, copied out for one search.
@@ -87,37 +117,49 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64
     }
 }
 
-type Chunks = HashMap<(i64, i64), [u32; CHUNK as usize]>;
+type Chunks = ChunkMap<[u32; CHUNK as usize]>;
 
-fn get(chunks: &Chunks, (i, j): (i64, i64)) -> bool {
+/// log2 of [`CHUNK`]: a cell's chunk and its place in it by shift and mask, as
+/// `div_euclid` and `rem_euclid` by [`CHUNK`] give them (negative cells too).
+const CHUNK_SHIFT: u32 = CHUNK.trailing_zeros();
+const _: () = assert!(CHUNK == 1 << CHUNK_SHIFT);
+
+fn chunk_of((i, j): (i64, i64)) -> (i64, i64) {
+    (i >> CHUNK_SHIFT, j >> CHUNK_SHIFT)
+}
+
+/// A cell's column and row within its chunk.
+fn within((i, j): (i64, i64)) -> (usize, usize) {
+    ((i & (CHUNK - 1)) as usize, (j & (CHUNK - 1)) as usize)
+}
+
+fn get(chunks: &Chunks, cell: (i64, i64)) -> bool {
+    let (u, v) = within(cell);
     chunks
-        .get(&(i.div_euclid(CHUNK), j.div_euclid(CHUNK)))
-        .is_some_and(|c| c[j.rem_euclid(CHUNK) as usize] & (1 << i.rem_euclid(CHUNK)) != 0)
+        .get(&chunk_of(cell))
+        .is_some_and(|c| c[v] & (1 << u) != 0)
 }
 
 impl SeenSpace {
     /// Cells seen free, in the order of a ray or a row (neighbours mostly share a
     /// chunk, looked up once for them): no obstacle remembered there either.
     fn mark_cells(&mut self, cells: &[(i64, i64)]) {
-        let chunk_of = |(i, j): (i64, i64)| (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
-        let mut k = 0;
-        while k < cells.len() {
-            let key = chunk_of(cells[k]);
-            let end = k + cells[k..]
-                .iter()
-                .take_while(|&&c| chunk_of(c) == key)
-                .count();
+        let mut rest = cells;
+        while let Some(&first) = rest.first() {
+            let key = chunk_of(first);
             let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
-            for &(i, j) in &cells[k..end] {
-                seen[j.rem_euclid(CHUNK) as usize] |= 1 << i.rem_euclid(CHUNK);
-            }
-            if let Some(hits) = self.hits.get_mut(&key) {
-                for &(i, j) in &cells[k..end] {
-                    let e = &mut hits[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
-                    *e = e.saturating_sub(PASS_LOSS);
+            let mut hits = self.hits.get_mut(&key);
+            // One pass over the run of cells in this chunk.
+            let mut n = 0;
+            for &c in rest.iter().take_while(|&&c| chunk_of(c) == key) {
+                let (u, v) = within(c);
+                seen[v] |= 1 << u;
+                if let Some(h) = hits.as_deref_mut() {
+                    h[v][u] = h[v][u].saturating_sub(PASS_LOSS);
                 }
+                n += 1;
             }
-            k = end;
+            rest = &rest[n..];
         }
     }
 
@@ -156,13 +198,13 @@ impl SeenSpace {
     }
 
     /// A beam returned from `(i, j)`: [`HIT_GAIN`] more evidence there.
-    fn returned(&mut self, (i, j): (i64, i64)) {
-        let key = (i.div_euclid(CHUNK), j.div_euclid(CHUNK));
+    fn returned(&mut self, cell: (i64, i64)) {
         let chunk = self
             .hits
-            .entry(key)
+            .entry(chunk_of(cell))
             .or_insert([[0; CHUNK as usize]; CHUNK as usize]);
-        let e = &mut chunk[j.rem_euclid(CHUNK) as usize][i.rem_euclid(CHUNK) as usize];
+        let (u, v) = within(cell);
+        let e = &mut chunk[v][u];
         *e = e.saturating_add(HIT_GAIN).min(HIT_CAP);
     }
 
@@ -334,6 +376,22 @@ mod tests {
         assert!(!seen.seen(-1.0, 1.1));
         let w = seen.window([0.0, 0.0], [8.0, 8.0]);
         assert!(w.seen(3.0, 1.1) && !w.seen(-1.0, 1.1) && !w.seen(30.0, 1.1));
+    }
+
+    #[test]
+    fn shift_and_mask_place_cells_as_euclidean_division_does() {
+        for i in -200..200 {
+            let c = (i, 3 - i);
+            assert_eq!(
+                chunk_of(c),
+                (i.div_euclid(CHUNK), (3 - i).div_euclid(CHUNK))
+            );
+            let (u, v) = within(c);
+            assert_eq!(
+                (u as i64, v as i64),
+                (i.rem_euclid(CHUNK), (3 - i).rem_euclid(CHUNK))
+            );
+        }
     }
 
     #[test]

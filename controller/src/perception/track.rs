@@ -12,7 +12,7 @@ use super::detect::{
     CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
     cover_segment, detect_with, distance, distance_to_segment,
 };
-use super::frame::{Pose2, ScanPoint, ValidScan};
+use super::frame::{BeamDirections, Pose2, ScanPoint, ValidScan};
 use super::{PerceptionError, check_finite};
 use crate::planner::Obstacle;
 
@@ -760,6 +760,8 @@ pub struct Perception {
     /// The scans of the last `STILL_BASELINE_S` and the newest one before, for
     /// [`Perception::still_clusters`].
     past: VecDeque<PastView>,
+    /// The laser's beam directions, computed once.
+    directions: BeamDirections,
 }
 
 impl Perception {
@@ -772,6 +774,7 @@ impl Perception {
             next_id: 1,
             last_stamp: None,
             past: VecDeque::new(),
+            directions: BeamDirections::default(),
         })
     }
 
@@ -799,7 +802,7 @@ impl Perception {
         pose: &Pose2,
     ) -> Result<PerceptionOutput, PerceptionError> {
         self.check_stamp_order(scan.stamp)?;
-        let detections = detect_with(scan, mount, pose, &self.cfg)?;
+        let detections = detect_with(scan, mount, pose, &self.cfg, Some(&mut self.directions))?;
         Ok(self.track(&detections, pose))
     }
 

@@ -311,7 +311,12 @@ impl ActuationWatch {
             )));
         }
         self.steering_enabled = r.enabled;
-        let hull = self.hold.or_else(|| self.steering.hull(now, STEER_WINDOW));
+        // Only a moving, enabled steering can move away: the targets' hull (a pass
+        // over a second of commands) is needed only then.
+        let moving = !(-STEER_RATE_NOISE..=STEER_RATE_NOISE).contains(&r.rate);
+        let hull = (r.enabled && !r.r#override && moving)
+            .then(|| self.hold.or_else(|| self.steering.hull(now, STEER_WINDOW)))
+            .flatten();
         let away = r.enabled
             && !r.r#override
             && hull.is_some_and(|(lo, hi)| {
@@ -362,7 +367,12 @@ impl ActuationWatch {
         {
             self.speeds.pop_front();
         }
-        let hull = self.throttle.hull(now, SPEED_WINDOW);
+        // Only a speed gaining or losing more than SPEED_RISE can move away: the
+        // targets' hull (a pass over two seconds of commands) is needed only then.
+        let moving = gain.is_some_and(|g| !(-SPEED_RISE..=SPEED_RISE).contains(&g));
+        let hull = (r.enabled && moving)
+            .then(|| self.throttle.hull(now, SPEED_WINDOW))
+            .flatten();
         let away = r.enabled
             && hull.zip(gain).is_some_and(|((lo, hi), gain)| {
                 (v > hi + SPEED_MARGIN && gain > SPEED_RISE)

@@ -180,16 +180,23 @@ impl ActuatorMonitor {
         if now - first < STEER_WINDOW_S {
             return;
         }
-        let (lo, hi) = self
+        // The span of the window's angles only grows as they are taken in: once it
+        // reaches STEER_FROZEN_DEG the steering moved, and the rest need not be looked at.
+        let span = self
             .angles
             .iter()
             .filter(|(t, _)| now - t <= STEER_WINDOW_S)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, a)| {
-                (lo.min(*a), hi.max(*a))
+            .try_fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, a)| {
+                let (lo, hi) = (lo.min(*a), hi.max(*a));
+                if hi - lo >= STEER_FROZEN_DEG {
+                    None
+                } else {
+                    Some((lo, hi))
+                }
             });
-        if hi - lo >= STEER_FROZEN_DEG {
+        let Some((lo, hi)) = span else {
             return;
-        }
+        };
         let asked: Vec<(bool, f64)> = self
             .steer_cmds
             .iter()

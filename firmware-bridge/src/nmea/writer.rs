@@ -347,21 +347,46 @@ fn validate_utc(utc: DateTime<Utc>) -> Result<(), NmeaError> {
     }
 }
 
+/// `v` in decimal, zero-padded to at least `width` digits, onto `out` (what
+/// `{v:0width$}` writes, without the formatting machinery: a GPS epoch writes some
+/// forty numbers).
+fn push_padded(out: &mut String, v: u64, width: usize) {
+    let mut digits = [0u8; 20];
+    let (mut n, mut k) = (v, digits.len());
+    loop {
+        k -= 1;
+        digits[k] = b'0' + (n % 10) as u8;
+        n /= 10;
+        if n == 0 {
+            break;
+        }
+    }
+    for _ in digits.len() - k..width {
+        out.push('0');
+    }
+    out.extend(digits[k..].iter().map(|&d| char::from(d)));
+}
+
+/// `units` as a decimal of `decimals` decimals (`units / 10^decimals`) onto `out`.
+fn push_decimal(out: &mut String, units: u64, decimals: u32) {
+    let p = 10u64.pow(decimals);
+    push_padded(out, units / p, 0);
+    if decimals > 0 {
+        out.push('.');
+        push_padded(out, units % p, decimals as usize);
+    }
+}
+
 /// Fixed-point decimal of a finite, bounded value (`-0.000` prints as `0.000`).
 fn fixed(v: f64, decimals: u32) -> String {
     let p = 10u64.pow(decimals);
     let units = (v.abs() * p as f64).round() as u64;
-    let sign = if v < 0.0 && units > 0 { "-" } else { "" };
-    if decimals == 0 {
-        format!("{sign}{units}")
-    } else {
-        format!(
-            "{sign}{}.{:0w$}",
-            units / p,
-            units % p,
-            w = decimals as usize
-        )
+    let mut out = String::with_capacity(24);
+    if v < 0.0 && units > 0 {
+        out.push('-');
     }
+    push_decimal(&mut out, units, decimals);
+    out
 }
 
 /// An angle in `[0, 360)` with `decimals` decimals, wrapping after rounding
@@ -369,7 +394,9 @@ fn fixed(v: f64, decimals: u32) -> String {
 fn angle(deg: f64, decimals: u32) -> String {
     let p = 10u64.pow(decimals);
     let units = (normalize_deg_360(deg) * p as f64).round() as u64 % (360 * p);
-    format!("{}.{:0w$}", units / p, units % p, w = decimals as usize)
+    let mut out = String::with_capacity(24);
+    push_decimal(&mut out, units, decimals);
+    out
 }
 
 /// Degrees and decimal minutes, `ddmm.mmmm` (`width` 2) or `dddmm.mmmm` (3), rounded
@@ -380,25 +407,25 @@ fn deg_min(deg: f64, width: usize, decimals: u8) -> String {
     let total = (deg.abs() * 60.0 * p as f64).round() as u64;
     let whole = total / (60 * p);
     let rem = total % (60 * p);
-    format!(
-        "{whole:0width$}{:02}.{:0w$}",
-        rem / p,
-        rem % p,
-        w = d as usize
-    )
+    let mut out = String::with_capacity(24);
+    push_padded(&mut out, whole, width);
+    push_padded(&mut out, rem / p, 2);
+    out.push('.');
+    push_padded(&mut out, rem % p, d as usize);
+    out
 }
 
 /// Time of day `hhmmss.ss`, rounded to the centisecond.
 fn hms(utc: DateTime<Utc>) -> String {
     let t = round_centis(utc);
     let cs = (t.nanosecond() / 10_000_000).min(99);
-    format!(
-        "{:02}{:02}{:02}.{:02}",
-        t.hour(),
-        t.minute(),
-        t.second(),
-        cs
-    )
+    let mut out = String::with_capacity(9);
+    for v in [t.hour(), t.minute(), t.second()] {
+        push_padded(&mut out, u64::from(v), 2);
+    }
+    out.push('.');
+    push_padded(&mut out, u64::from(cs), 2);
+    out
 }
 
 fn round_centis(utc: DateTime<Utc>) -> DateTime<Utc> {
@@ -486,7 +513,15 @@ impl Formatter {
             }
         };
         let sum = checksum(body.as_bytes());
-        format!("${body}*{sum:02X}\r\n")
+        const HEX: &[u8; 16] = b"0123456789ABCDEF";
+        let mut out = String::with_capacity(body.len() + 6);
+        out.push('$');
+        out.push_str(&body);
+        out.push('*');
+        out.push(char::from(HEX[usize::from(sum >> 4)]));
+        out.push(char::from(HEX[usize::from(sum & 0xf)]));
+        out.push_str("\r\n");
+        out
     }
 
     fn lat_lon(&self, body: &mut String, fix: &GpsFix) -> std::fmt::Result {
@@ -677,6 +712,34 @@ mod tests {
         assert_eq!(fixed(12.0, 1), "12.0");
         assert_eq!(angle(359.9996, 3), "0.000");
         assert_eq!(angle(-90.0, 2), "270.00");
+    }
+
+    #[test]
+    fn numbers_are_padded_as_format_pads_them() {
+        for v in [0u64, 1, 9, 10, 99, 100, 12_345, 999_999_999, u64::MAX] {
+            for width in 0..22 {
+                let mut out = String::from("x");
+                push_padded(&mut out, v, width);
+                assert_eq!(out, format!("x{v:0width$}"));
+            }
+        }
+        for (v, d) in [
+            (0.0, 2),
+            (-12.5, 1),
+            (7.25, 0),
+            (1e6 + 0.001, 3),
+            (-0.004, 2),
+        ] {
+            let p = 10u64.pow(d);
+            let units = (f64::abs(v) * p as f64).round() as u64;
+            let sign = if v < 0.0 && units > 0 { "-" } else { "" };
+            let expected = if d == 0 {
+                format!("{sign}{units}")
+            } else {
+                format!("{sign}{}.{:0w$}", units / p, units % p, w = d as usize)
+            };
+            assert_eq!(fixed(v, d), expected);
+        }
     }
 
     #[test]

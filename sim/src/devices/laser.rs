@@ -200,8 +200,8 @@ impl LaserDevice {
             (*range, *intensity) = self.measure(*hit);
         }
         self.hits = hits;
-        frame.ranges[n..].fill(0.0);
-        frame.intensities[n..].fill(0.0);
+        zero_tail(&mut frame.ranges[n..]);
+        zero_tail(&mut frame.intensities[n..]);
         self.sequence += 1;
     }
 
@@ -240,6 +240,14 @@ impl LaserDevice {
     }
 }
 
+/// Zero the entries past the beams in use, unless they are already (a new frame's are:
+/// checking costs a tenth of writing them again).
+fn zero_tail(tail: &mut [f32]) {
+    if tail.iter().fold(0, |any, v| any | v.to_bits()) != 0 {
+        tail.fill(0.0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,6 +271,51 @@ mod tests {
         assert_ne!(noise_seed(1), noise_seed(2));
         assert_ne!(noise_seed(1), 1);
         assert_eq!(noise_seed(7), noise_seed(7));
+    }
+
+    #[test]
+    fn a_frames_tail_is_zeroed_whatever_it_held() {
+        for held in [0.0f32, -0.0, 1.5, f32::NAN, f32::INFINITY] {
+            let mut tail = [0.0f32; 9];
+            tail[4] = held;
+            zero_tail(&mut tail);
+            assert!(tail.iter().all(|v| v.to_bits() == 0), "{held}");
+        }
+    }
+
+    #[test]
+    fn a_reused_frame_reads_as_a_new_one() {
+        let obstacles = [Obstacle::Circle {
+            x: 5.0,
+            y: 1.0,
+            radius: 0.5,
+            motion: None,
+        }];
+        let world = World::new(&obstacles);
+        let device = || LaserDevice::new(&LaserConfig::default(), &obstacles, 7, 0);
+        let (mut a, mut b) = (device().expect("valid"), device().expect("valid"));
+        let fresh = a.scan(&world, 0.02, 0.0, 0.0, 0.1);
+        let mut reused = Box::new(LaserFrame {
+            version: 0,
+            count: 3,
+            sequence: 99,
+            stamp_ns: 1,
+            angle_min: 1.0,
+            angle_increment: -1.0,
+            time_increment: 9.0,
+            scan_time: 9.0,
+            range_min: 5.0,
+            range_max: 1.0,
+            ranges: [-2.5; firmware_bridge::laser::MAX_BEAMS],
+            intensities: [f32::NAN; firmware_bridge::laser::MAX_BEAMS],
+        });
+        b.scan_into(&world, 0.02, 0.0, 0.0, 0.1, &mut reused);
+        assert!(*reused == fresh, "the reused frame differs");
+        assert!(
+            fresh.ranges[..fresh.count as usize]
+                .iter()
+                .any(|r| r.is_finite())
+        );
     }
 
     #[test]
