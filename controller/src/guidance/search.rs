@@ -65,8 +65,8 @@ pub(super) const MAX_LOCAL_HEADING: f64 = 0.5;
 /// The local goal on `route` from progress `s`: `horizon_m` further along the route
 /// (the goal once that near), moved on along the route, or else back towards the car,
 /// until it and the route before it are clear ([`Clearance`]) and, round a corner, the
-/// straight line to it too (back towards the car first when the nominal one's is
-/// not); the nominal one when none is (the planner then finds no path, and the car
+/// straight line to it too (back towards the car first when only the nominal one's
+/// line is not); the nominal one when none is (the planner then finds no path, and the car
 /// stops).
 pub(super) fn local_goal(
     route: &Route,
@@ -90,8 +90,8 @@ pub(super) fn local_goal(
     // the route at `s` clear too. A goal far along the next leg pulled the path across
     // the corner's inside, into the trees standing there, and the car came to the
     // corner heading away from it; one further on still, whose line passes inside the
-    // trees, took the car 12 m off the route. So a nominal goal out of sight is
-    // brought nearer, towards the corner, before one further on is tried.
+    // trees, took the car 12 m off the route. So a nominal goal clear but out of sight
+    // is brought nearer, towards the corner, before one further on is tried.
     let here = route.at(s);
     let in_sight =
         |g: &RoutePoint| !turns(route, s, g.s) || chord_clear(&here, g, obstacles, clearance.r0);
@@ -101,10 +101,11 @@ pub(super) fn local_goal(
     let nearer = (1..=back)
         .map(|i| nominal - i as f64 * LOCAL_GOAL_STEP)
         .filter(|&g| g > s);
-    let order: Vec<f64> = if in_sight(&route.local_goal(nominal)) {
-        on.chain(nearer).collect()
-    } else {
+    let first = route.local_goal(nominal);
+    let order: Vec<f64> = if clear(&first) && !in_sight(&first) {
         nearer.chain(on).collect()
+    } else {
+        on.chain(nearer).collect()
     };
     order
         .into_iter()

@@ -863,20 +863,20 @@ impl Perception {
             }
         }
         // The local map: a confirmed static track the scan could not have seen is
-        // remembered, not missed, while within `memory_radius`. Seen means enough
-        // beams to make a cluster (`min_points`) reach the inner half of its disc:
-        // beams grazing its edge (a walker leaving the field of view) may miss it or
-        // make a cluster too small to keep, so their silence is no miss.
-        let sees = |x: f64, y: f64, r: f64| {
+        // remembered, not missed, while within `memory_radius`. A mover is in sight
+        // only when enough beams to make a cluster (`min_points`) reach the inner half
+        // of its disc: beams grazing its edge (a walker leaving the field of view) may
+        // miss it or make a cluster too small to keep, so their silence is no miss.
+        let sees = |x: f64, y: f64, r: f64| detections.view.sees(&detections.laser, x, y, r);
+        let sees_mover = |x: f64, y: f64, r: f64| {
             detections
                 .view
                 .shows(&detections.laser, x, y, 0.5 * r, cfg.min_points)
         };
-        let out_of_sight_nearby = |x: f64, y: f64, r: f64| {
-            distance([x, y], [pose.x, pose.y]) - r <= cfg.memory_radius && !sees(x, y, r)
-        };
+        let nearby =
+            |x: f64, y: f64, r: f64| distance([x, y], [pose.x, pose.y]) - r <= cfg.memory_radius;
         let remembered = |x: f64, y: f64, r: f64, life: &Life, moving: bool| {
-            life.memorable(cfg) && !moving && out_of_sight_nearby(x, y, r)
+            life.memorable(cfg) && !moving && nearby(x, y, r) && !sees(x, y, r)
         };
         for ((t, u), h) in self.tracks.iter_mut().zip(&updated).zip(&mut held) {
             let moving = t.reported_velocity(stamp, cfg) != [0.0, 0.0];
@@ -886,7 +886,8 @@ impl Perception {
             if moving
                 && t.life.confirmed
                 && stamp - t.last_hit <= cfg.moving_memory_s
-                && out_of_sight_nearby(t.state[0], t.state[1], t.radius)
+                && nearby(t.state[0], t.state[1], t.radius)
+                && !sees_mover(t.state[0], t.state[1], t.radius)
             {
                 // Moving out of sight: it goes on where its velocity takes it (the
                 // prediction above), its motion held as last measured.
