@@ -234,11 +234,13 @@ impl PointTrack {
 
     /// Corrects the track with `m`; false when `m` only shows the object is there.
     fn update(&mut self, m: &CircleMeasurement, cfg: &PerceptionConfig) -> bool {
-        if m.truncated && m.kind == ObstacleKind::Unknown && self.life.confirmed {
+        if m.truncated && m.kind == ObstacleKind::Unknown && self.moving_since.is_some() {
             // A blob cut by the edge of the field of view: its centre lies where the
             // visible part ends, not where the object is (a walker leaving the view
-            // seemed to speed up and turn). It shows the object is there; the track
-            // coasts on as predicted, its motion held.
+            // seemed to speed up and turn). Of a mover whose motion is established, it
+            // shows the object is there; the track coasts on as predicted, its motion
+            // held. Anything else (a cart coming into view from behind, a post) is
+            // measured as before: its motion is yet to be found, or it has none.
             self.life.record(true, cfg);
             return false;
         }
