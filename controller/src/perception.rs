@@ -149,6 +149,7 @@ mod track;
 
 pub use cluster::cluster_points;
 pub use config::PerceptionConfig;
+pub(crate) use detect::distance_to_segment;
 pub use detect::{
     CircleMeasurement, Detections, Hit, ObstacleKind, Seen, SegmentMeasurement, View,
     cover_segment, detect,

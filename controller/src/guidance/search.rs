@@ -7,6 +7,7 @@
 use super::footprint::Footprint;
 use super::frame::wrap;
 use crate::config::PlannerConfig;
+use crate::perception::distance_to_segment;
 use crate::planner::Obstacle;
 use crate::route::{Route, RoutePoint};
 
@@ -118,32 +119,26 @@ pub(super) fn local_goal(
 /// [`local_goal`], radians.
 const CORNER_TURN: f64 = 0.5;
 
-/// Whether the route turns a corner between `s0` and `s1`: its heading somewhere
+/// Whether the route turns a corner between `s0` and `s1`: the heading of a leg
 /// between them more than [`CORNER_TURN`] from its heading at `s0`.
 fn turns(route: &Route, s0: f64, s1: f64) -> bool {
     let h0 = route.at(s0).heading;
-    let n = ((s1 - s0) / LOCAL_GOAL_STEP).ceil().max(0.0) as usize;
-    (1..=n).any(|k| {
-        let h = route.at((s0 + k as f64 * LOCAL_GOAL_STEP).min(s1)).heading;
-        wrap(h - h0).abs() > CORNER_TURN
-    })
+    let (arc, points) = (route.arc(), route.points());
+    arc.windows(2)
+        .zip(points.windows(2))
+        .filter(|(ends, _)| ends[1] > s0 && ends[0] < s1)
+        .any(|(_, leg)| {
+            let h = (leg[1].1 - leg[0].1).atan2(leg[1].0 - leg[0].0);
+            wrap(h - h0).abs() > CORNER_TURN
+        })
 }
 
-/// Whether the straight line from `a` to `b` keeps `r0` clear of every static obstacle
-/// (checked every [`LOCAL_GOAL_STEP`]).
+/// Whether the straight line from `a` to `b` keeps `r0` clear of every static obstacle.
 fn chord_clear(a: &RoutePoint, b: &RoutePoint, obstacles: &[Obstacle], r0: f64) -> bool {
-    let n = ((b.x - a.x).hypot(b.y - a.y) / LOCAL_GOAL_STEP)
-        .ceil()
-        .max(1.0) as usize;
-    (0..=n).all(|k| {
-        let f = k as f64 / n as f64;
-        let p = RoutePoint {
-            x: a.x + f * (b.x - a.x),
-            y: a.y + f * (b.y - a.y),
-            ..*a
-        };
-        clear_of(&p, obstacles, r0)
-    })
+    obstacles
+        .iter()
+        .filter(|o| o.vx == 0.0 && o.vy == 0.0)
+        .all(|o| distance_to_segment([o.x, o.y], [a.x, a.y], [b.x, b.y]) > o.radius + r0)
 }
 
 /// `base` moved `shift` metres to its left (negative: right).

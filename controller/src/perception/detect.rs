@@ -242,7 +242,7 @@ pub enum Seen {
 const CHORD_MAX: f64 = 0.5;
 
 /// Distance from `p` to the segment from `a` to `b`.
-pub(super) fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+pub(crate) fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let l2 = dx * dx + dy * dy;
     let t = if l2 > 0.0 {
@@ -290,18 +290,15 @@ pub(super) fn detect_with(
     let mut circles = Vec::new();
     let mut segments = Vec::new();
     let last_beam = scan.ranges.len().saturating_sub(1);
+    let edge = |p: Option<&ScanPoint>| p.is_some_and(|p| p.beam == 0 || p.beam == last_beam);
     for (index, range) in clusters.iter().enumerate() {
-        let world: Vec<[f64; 2]> = points[range.clone()].iter().map(|p| p.world).collect();
+        let cluster = &points[range.clone()];
+        let world: Vec<[f64; 2]> = cluster.iter().map(|p| p.world).collect();
         let from = circles.len();
         classify(&world, origin, index, cfg, &mut circles, &mut segments);
-        let edge = |p: Option<&ScanPoint>| p.is_some_and(|p| p.beam == 0 || p.beam == last_beam);
-        if edge(points.get(range.start))
-            || edge(range.end.checked_sub(1).and_then(|k| points.get(k)))
-        {
-            circles
-                .iter_mut()
-                .skip(from)
-                .for_each(|c| c.truncated = true);
+        let truncated = edge(cluster.first()) || edge(cluster.last());
+        for c in &mut circles[from..] {
+            c.truncated = truncated;
         }
     }
     Ok(Detections {
