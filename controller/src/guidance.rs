@@ -154,11 +154,13 @@ const ROUTE_END: f64 = 1e-9;
 pub const STANDING: f64 = 0.05;
 /// A path being followed is kept past a replanning that finds none only with the car
 /// this near it sideways (metres) and in heading (radians), and this much of it left
-/// (metres): a path whose end is near is driven to its end and stopped at, so that
-/// recovery can begin ([`Navigator::recover`]).
+/// (metres), unless it ends at the goal: a path whose end is near is driven to its end
+/// and stopped at, so that recovery can begin ([`Navigator::recover`]). A path ends at
+/// the goal when its end lies within [`KEEP_AT_GOAL`] of it, metres.
 const KEEP_OFF_PATH: f64 = 0.3;
 const KEEP_HEADING: f64 = 0.2;
 const KEEP_LEFT: f64 = 3.0;
+const KEEP_AT_GOAL: f64 = 0.1;
 /// Step along a kept path at which it is checked against the obstacles, metres.
 const KEEP_CHECK_STEP: f64 = 0.25;
 /// Giving way to oncoming traffic ([`Navigator::yields`]): the car is at its stand
@@ -868,7 +870,9 @@ impl Navigator {
     /// Whether the path being followed may be kept when a replanning finds no feasible
     /// one: it was planned among static obstacles only, not while turning to align;
     /// the car is on it (within [`KEEP_OFF_PATH`] and [`KEEP_HEADING`]); at least
-    /// [`KEEP_LEFT`] of it is left; and the rest of it clears every obstacle now
+    /// [`KEEP_LEFT`] of it is left, or it ends at the goal (a polynomial over the last
+    /// metres to the goal may need more steering than allowed where the one that leads
+    /// there does not); and the rest of it clears every obstacle now
     /// reported as planned (none of them moving): by the planning circle, or through a
     /// passage by the car's rectangle grown by the passage margin, an obstacle the car
     /// already stands within the margin of allowed no closer. A car whose replanning
@@ -892,7 +896,10 @@ impl Navigator {
         let off = (py - path.y(x)).abs();
         let heading = wrap(pose.theta - self.frame.angle - path.heading(x)).abs();
         let left = path.x_f() - x;
-        if off > KEEP_OFF_PATH || heading > KEEP_HEADING || left < KEEP_LEFT {
+        let (ex, ey) = self.frame.to_world(path.x_f(), path.y(path.x_f()));
+        let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
+        let at_goal = (ex - goal.0).hypot(ey - goal.1) <= KEEP_AT_GOAL;
+        if off > KEEP_OFF_PATH || heading > KEEP_HEADING || (left < KEEP_LEFT && !at_goal) {
             return false;
         }
         let n = (left / KEEP_CHECK_STEP).ceil() as usize;
@@ -1499,6 +1506,36 @@ mod tests {
         };
         assert!(!nav.current_path_holds(&pose, &[post_beside, walker]));
         assert!(nav.current_path_holds(&pose, &[post_beside]));
+    }
+
+    #[test]
+    fn a_path_that_ends_at_the_goal_is_kept_over_its_last_metres() {
+        // Under GPS noise a replanning 1.6 m from the goal found no polynomial within
+        // the steering limit, and the path that led there was dropped for having less
+        // than KEEP_LEFT left: the car stopped 1.25 m from the goal for good.
+        let cfg = east_to(20.0);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let start = car_at(15.0, 0.0, 0.0, 2.0);
+        assert!(matches!(
+            replan_and_follow(&mut nav, &start, &[]),
+            Guidance::Drive { .. }
+        ));
+        let pose = car_at(18.2, 0.05, 0.0, 1.5);
+        nav.follow(&pose);
+        assert!(nav.replan_due(0.5, &pose));
+        let outcome = starved(&nav, &pose, &[]);
+        assert!(matches!(&outcome.result, Ok((None, r)) if r.kept), "{:?}", outcome.result);
+        nav.accept(outcome);
+        assert!(matches!(nav.follow(&pose), Guidance::Drive { .. }));
+        // A path with as little left whose end is not the goal is not kept.
+        let mut nav = Navigator::new(&east_to(40.0)).expect("navigator");
+        replan_and_follow(&mut nav, &car_at(0.0, 0.0, 0.0, 2.0), &[]);
+        let Some(t) = &nav.active else {
+            panic!("no path")
+        };
+        let end = t.path().x_f();
+        assert!(end < 38.0, "the first path ends at the goal: {end}");
+        assert!(!nav.current_path_holds(&car_at(end - 1.8, 0.0, 0.0, 2.0), &[]));
     }
 
     #[test]
