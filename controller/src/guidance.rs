@@ -112,6 +112,7 @@ pub use solver::{ManoeuvreRecord, Pass, PlanOutcome, PlanRecord, PlanRequest, so
 
 use crate::config::ControllerConfig;
 use crate::localisation::Pose;
+use crate::perception::SEEN_CELL;
 use crate::planner::{self, PlanProblem, Trajectory};
 use crate::route::{Route, RoutePoint};
 use frame::{clear_at, clip_to_start, wrap};
@@ -1124,8 +1125,14 @@ impl Navigator {
         if self.seen_at.is_none() {
             let pc = &self.cfg.planner;
             let (depth, width) = (pc.seen_behind_at_start_m, pc.seen_behind_at_start_width_m);
+            // A cell is marked where any point of the rectangle lies in it, so the marks
+            // reach up to a cell's extent along the car's heading past its far end: the
+            // rectangle is marked that much shorter, and never reaches past what the
+            // operator checked (GPS noise once let a reversal end 0.1 m from a cart
+            // 0.4 m beyond it).
+            let reach = SEEN_CELL * (car[2].cos().abs() + car[2].sin().abs());
             self.seen
-                .mark_rectangle(car, f.rear + depth, -f.rear, width / 2.0);
+                .mark_rectangle(car, f.rear + (depth - reach).max(0.0), -f.rear, width / 2.0);
         }
         self.seen.mark_rectangle(car, f.rear, f.front, f.half_width);
         self.seen.update(scan, laser);
@@ -1524,7 +1531,11 @@ mod tests {
         nav.follow(&pose);
         assert!(nav.replan_due(0.5, &pose));
         let outcome = starved(&nav, &pose, &[]);
-        assert!(matches!(&outcome.result, Ok((None, r)) if r.kept), "{:?}", outcome.result);
+        assert!(
+            matches!(&outcome.result, Ok((None, r)) if r.kept),
+            "{:?}",
+            outcome.result
+        );
         nav.accept(outcome);
         assert!(matches!(nav.follow(&pose), Guidance::Drive { .. }));
         // A path with as little left whose end is not the goal is not kept.
@@ -2023,6 +2034,51 @@ mod tests {
     pub(super) fn seen_round(mut nav: Navigator) -> Navigator {
         nav.seen.mark_rectangle([0.0, 0.0, 0.0], 30.0, 30.0, 30.0);
         nav
+    }
+
+    #[test]
+    fn the_space_checked_behind_at_the_start_is_never_marked_past_its_far_end() {
+        // Marked cell by cell, the rectangle reached up to a cell past the depth the
+        // operator checked: under GPS noise a reversal ended 0.1 m from a cart 0.4 m
+        // beyond it (boxed-in).
+        let cfg = ControllerConfig::default();
+        let pc = &cfg.planner;
+        let dropouts = [f32::NAN; 3];
+        let scan = crate::perception::Scan {
+            stamp: 0.0,
+            angle_min: -0.1,
+            angle_increment: 0.1,
+            range_min: 0.1,
+            range_max: 20.0,
+            ranges: &dropouts,
+        };
+        for heading in [0.0, 0.3, std::f64::consts::FRAC_PI_4, 2.0, -2.8] {
+            let mut nav = Navigator::new(&cfg).expect("navigator");
+            let car = [3.1, -1.7, heading];
+            let laser = crate::perception::Pose2 {
+                x: car[0],
+                y: car[1],
+                yaw: heading,
+            };
+            nav.observe(0.0, &scan, &laser, car);
+            let (c, s) = (heading.cos(), heading.sin());
+            let rear = nav.footprint().rear;
+            let behind = |d: f64, v: f64| {
+                let u = -(rear + d);
+                nav.seen
+                    .seen(car[0] + u * c - v * s, car[1] + u * s + v * c)
+            };
+            let depth = pc.seen_behind_at_start_m;
+            for v in [-0.5, 0.0, 0.5] {
+                for past in [0.01, 0.1, 0.2, 0.3] {
+                    assert!(!behind(depth + past, v), "heading {heading}: {past} m past");
+                }
+                assert!(
+                    behind(depth - 2.0 * SEEN_CELL, v),
+                    "heading {heading}: inside"
+                );
+            }
+        }
     }
 
     /// Replan at `now` from `pose` when due, recover, follow: as the controller's tick does.
