@@ -64,26 +64,11 @@ pub struct Vehicle {
     pub brake_decel: f64,
 }
 
-/// A stop's last, slow part is braked (`control::finish_brake`): with no speed asked
-/// for and the wheels turning slower than this, m/s...
-pub const FINISH_BELOW: f64 = 0.15;
-/// ...at this share of full brake, percent.
-pub const FINISH_BRAKE: f64 = 25.0;
-
 impl Vehicle {
-    /// How far the car at speed `v` rolls on once a stop is commanded, metres: for the
-    /// speed loop's dead time at `v`, then under its first-order lag (command nought:
-    /// dv/dt = -v / time constant) down to [`FINISH_BELOW`] and for the dead time
-    /// again, then at most on the finishing brake ([`FINISH_BRAKE`]).
+    /// How far the car at speed `v` rolls on before a lower speed commanded now takes
+    /// hold: the speed loop's dead time and time constant at that speed, metres.
     pub fn coast_m(&self, v: f64) -> f64 {
-        let v = v.abs();
-        let finish_decel = FINISH_BRAKE / 100.0 * self.brake_decel;
-        let lag = match v > FINISH_BELOW {
-            true => (self.speed_time_constant_s + self.speed_dead_time_s) * (v - FINISH_BELOW),
-            false => 0.0,
-        };
-        let slow = v.min(FINISH_BELOW);
-        v * self.speed_dead_time_s + lag + slow * slow / (2.0 * finish_decel)
+        v.abs() * (self.speed_dead_time_s + self.speed_time_constant_s)
     }
 }
 

@@ -15,7 +15,7 @@ use golf_car_can::{
 };
 use serde::Serialize;
 
-use crate::config::{ControllerConfig, FINISH_BELOW, FINISH_BRAKE};
+use crate::config::ControllerConfig;
 use crate::guidance::{
     FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
 };
@@ -45,19 +45,6 @@ const STOPPED: f64 = 0.05;
 const STOP_MARGIN_M: f64 = 0.3;
 /// ...with this much more brake than the calibrated deceleration says it needs.
 const BRAKE_MARGIN: f64 = 1.25;
-
-/// The brake that finishes a stop: [`FINISH_BRAKE`] with `speed` (m/s) asked for
-/// nought and the wheels at `v` turning slower than [`FINISH_BELOW`], else none (the
-/// speed loop's first-order lag took seconds over the last centimetres: 1.6 s from
-/// 0.15 to 0.05 m/s with a 1.5 s time constant, at every cusp of a manoeuvre and every
-/// end of a reversal).
-fn finish_brake(v: f64, speed: f64) -> f64 {
-    if speed <= 0.0 && v.abs() < FINISH_BELOW {
-        FINISH_BRAKE
-    } else {
-        0.0
-    }
-}
 
 /// The brake a car at wheel speed `v` needs to stop within `room` metres, percent: none
 /// while the deceleration the speed profile plans with (`follower.decel`) is enough;
@@ -633,8 +620,7 @@ impl Controller {
                     steer_cmd: wanted.to_radians(),
                     speed_cmd: speed,
                 });
-                let v = self.speed();
-                let brake = stop_brake(v, room, &self.cfg).max(finish_brake(v, speed));
+                let brake = stop_brake(self.speed(), room, &self.cfg);
                 Demand::forward(
                     ControllerHeartbeatState::Auto,
                     (true, steer_deg),
@@ -644,13 +630,12 @@ impl Controller {
             Guidance::Reverse { steer, speed } => {
                 self.stop_reason = None;
                 let steer_deg = steer.to_degrees().clamp(-limit, limit);
-                let speed = speed.clamp(0.0, top_speed);
                 Demand {
                     gear: ThrottleCmdGear::Reverse,
                     ..Demand::forward(
                         ControllerHeartbeatState::Auto,
                         (true, steer_deg),
-                        (true, speed, finish_brake(self.speed(), speed)),
+                        (true, speed.clamp(0.0, top_speed), 0.0),
                     )
                 }
             }
@@ -776,28 +761,5 @@ impl Controller {
         self.watch.commanded(now, &out, hold);
         self.monitor.commanded(now, &out);
         out
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_stop_is_finished_on_the_brake_and_the_roll_to_it_reckons_with_that() {
-        assert_eq!(finish_brake(0.1, 0.0), FINISH_BRAKE);
-        assert_eq!(finish_brake(-0.1, 0.0), FINISH_BRAKE);
-        assert_eq!(finish_brake(0.1, 0.3), 0.0, "not while a speed is asked for");
-        assert_eq!(finish_brake(0.5, 0.0), 0.0, "the speed loop slows it first");
-        let mut v = ControllerConfig::default().vehicle;
-        v.speed_dead_time_s = 0.3;
-        v.speed_time_constant_s = 1.5;
-        v.brake_decel = 4.0;
-        // At 0.35 m/s: the dead time, the lag down to 0.15 m/s (and the dead time of
-        // the brake's command), the finishing brake's 1 m/s^2.
-        let finish = 0.15 * 0.15 / 2.0;
-        let expected = 0.35 * 0.3 + (1.5 + 0.3) * 0.2 + finish;
-        assert!((v.coast_m(0.35) - expected).abs() < 1e-12, "{}", v.coast_m(0.35));
-        assert!((v.coast_m(-0.1) - (0.1 * 0.3 + 0.1 * 0.1 / 2.0)).abs() < 1e-12);
     }
 }

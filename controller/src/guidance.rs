@@ -2554,8 +2554,7 @@ mod tests {
     #[test]
     fn stops_are_commanded_early_by_what_a_slow_speed_loop_rolls_on() {
         // Approaching the goal at 1.5 m/s, 1.5 m from it: the command lets the car
-        // stop there after rolling on for the speed loop's dead time, under its lag
-        // down to FINISH_BELOW (0.15 m/s), and on the finishing brake (1 m/s^2).
+        // stop there after rolling on for the speed loop's dead time and time constant.
         let speed_at = |dead: f64, constant: f64| {
             let mut cfg = east_to(30.0);
             cfg.vehicle.speed_dead_time_s = dead;
@@ -2573,11 +2572,11 @@ mod tests {
         let (slow, _) = speed_at(0.1, 0.3);
         let to_goal = 1.5;
         let decel = cfg.follower.decel;
-        let braked = 0.15 * 0.15 / 2.0;
-        let expected = (2.0 * decel * (to_goal - braked)).sqrt();
-        assert!((quick - expected).abs() < 1e-9, "{quick} vs {expected}");
-        let coast = 1.5 * 0.1 + (1.5 - 0.15) * 0.4 + braked;
-        let expected = (2.0 * decel * (to_goal - coast)).sqrt();
+        assert!(
+            (quick - (2.0 * decel * to_goal).sqrt()).abs() < 1e-9,
+            "{quick}"
+        );
+        let expected = (2.0 * decel * (to_goal - 1.5 * 0.4)).sqrt();
         assert!((slow - expected).abs() < 1e-9, "{slow} vs {expected}");
     }
 }
