@@ -1126,11 +1126,11 @@ impl Navigator {
             let pc = &self.cfg.planner;
             let (depth, width) = (pc.seen_behind_at_start_m, pc.seen_behind_at_start_width_m);
             // A cell is marked where any point of the rectangle lies in it, so the marks
-            // reach up to a cell's extent along the car's heading past its far end: the
-            // rectangle is marked that much shorter, and never reaches past what the
-            // operator checked (GPS noise once let a reversal end 0.1 m from a cart
-            // 0.4 m beyond it).
-            let reach = SEEN_CELL * (car[2].cos().abs() + car[2].sin().abs());
+            // reached up to a cell's extent along the car's heading past its far end
+            // (under GPS noise a reversal ended 0.1 m from a cart 0.4 m beyond it): the
+            // rectangle is marked half that shorter, so that they reach at most half a
+            // cell's extent past it, as where a cell is marked by its centre.
+            let reach = SEEN_CELL / 2.0 * (car[2].cos().abs() + car[2].sin().abs());
             self.seen
                 .mark_rectangle(car, f.rear + (depth - reach).max(0.0), -f.rear, width / 2.0);
         }
@@ -2037,7 +2037,7 @@ mod tests {
     }
 
     #[test]
-    fn the_space_checked_behind_at_the_start_is_never_marked_past_its_far_end() {
+    fn the_space_checked_behind_at_the_start_is_marked_at_most_half_a_cell_past_its_far_end() {
         // Marked cell by cell, the rectangle reached up to a cell past the depth the
         // operator checked: under GPS noise a reversal ended 0.1 m from a cart 0.4 m
         // beyond it (boxed-in).
@@ -2069,8 +2069,9 @@ mod tests {
                     .seen(car[0] + u * c - v * s, car[1] + u * s + v * c)
             };
             let depth = pc.seen_behind_at_start_m;
+            let half_cell = SEEN_CELL / 2.0 * (c.abs() + s.abs());
             for v in [-0.5, 0.0, 0.5] {
-                for past in [0.01, 0.1, 0.2, 0.3] {
+                for past in [0.01, 0.1, 0.2, 0.3].map(|d| half_cell + d) {
                     assert!(!behind(depth + past, v), "heading {heading}: {past} m past");
                 }
                 assert!(

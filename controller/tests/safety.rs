@@ -47,10 +47,7 @@ const ALL: Feed = Feed {
 
 impl Rig {
     fn new() -> Rig {
-        Rig::with(ControllerConfig::default())
-    }
-
-    fn with(cfg: ControllerConfig) -> Rig {
+        let cfg = ControllerConfig::default();
         Rig {
             ctl: Controller::new(&cfg).expect("controller"),
             frame: LocalFrame::new(cfg.mission.datum.geodetic()).expect("datum"),
@@ -296,11 +293,7 @@ fn start_up_gaps_pass_while_disabled_and_the_first_path_is_planned_before_enabli
 
 #[test]
 fn a_car_in_a_dead_end_commands_gear_reverse_and_stays_in_auto() {
-    // The operator checked 3 m behind the car: room to back straight out of the cup
-    // (with 2.6 m the manoeuvre turns in forward first, and the rig's car never moves).
-    let mut cfg = ControllerConfig::default();
-    cfg.planner.seen_behind_at_start_m = 3.0;
-    let mut rig = Rig::with(cfg);
+    let mut rig = Rig::new();
     // Returns 3 m from the laser over the whole front half: a cup round the nose.
     for (i, r) in rig.ranges.iter_mut().enumerate() {
         let angle = -135.0 + 0.5 * i as f64;
