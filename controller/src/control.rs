@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use crate::config::ControllerConfig;
 use crate::guidance::{
-    FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, solve,
+    FollowInputs, Guidance, GuidanceError, Navigator, PlanOutcome, PlanRequest, Reuse,
 };
 use crate::localisation::{Localiser, Pose, propagate};
 use crate::perception::{Perception, PerceptionError, Pose2, ValidScan};
@@ -147,8 +147,9 @@ impl PlanWorker {
             .name("planner".to_owned())
             .spawn(move || {
                 // Ends when the controller (the sender) is dropped.
+                let mut reuse = Reuse::default();
                 while let Ok(req) = jobs.recv() {
-                    if done.send(solve(&req)).is_err() {
+                    if done.send(reuse.solve(&req)).is_err() {
                         break;
                     }
                 }
@@ -206,6 +207,8 @@ pub struct Controller {
     pub bad_scans: u64,
     /// Where replanning runs: off the command loop in HIL, inline in SIL.
     planning: Planning,
+    /// Solves the replannings made on the command loop (the thread has its own).
+    reuse: Reuse,
     /// The code sent in FAULT_REPORT while in estop.
     fault_code: FaultReportCode,
     /// The FAULT_REPORT detail while in estop (the CAN ID a finding concerns).
@@ -246,6 +249,7 @@ impl Controller {
             next_fault: 0.0,
             bad_scans: 0,
             planning: Planning::Inline,
+            reuse: Reuse::default(),
             fault_code: FaultReportCode::Internal,
             fault_detail: 0,
             watch: ActuationWatch::new(),
@@ -292,7 +296,9 @@ impl Controller {
             Planning::Inline => {
                 if self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
-                    let outcome = solve(&self.nav.request(now, pose, &self.obstacles));
+                    let outcome = self
+                        .reuse
+                        .solve(&self.nav.request(now, pose, &self.obstacles));
                     self.nav.accept(outcome);
                 }
             }
@@ -302,7 +308,7 @@ impl Controller {
                 }
                 if self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
-                    *done = Some(Box::new(solve(&self.nav.request(
+                    *done = Some(Box::new(self.reuse.solve(&self.nav.request(
                         now,
                         pose,
                         &self.obstacles,
@@ -331,7 +337,7 @@ impl Controller {
                 }
                 if waiting.is_none() && self.nav.replan_due(now, pose) {
                     self.nav.issued(now);
-                    *waiting = Some(Box::new(solve(&self.nav.request(
+                    *waiting = Some(Box::new(self.reuse.solve(&self.nav.request(
                         now,
                         pose,
                         &self.obstacles,

@@ -95,6 +95,7 @@ mod frame;
 mod lanes;
 pub mod manoeuvre;
 mod pacing;
+mod reuse;
 mod reverse;
 mod search;
 mod solver;
@@ -107,6 +108,7 @@ pub use follower::{FollowInputs, SteeringLaw};
 pub use footprint::Footprint;
 pub use frame::PathFrame;
 pub use pacing::{Pacing, sweep};
+pub use reuse::Reuse;
 pub use reverse::Reverse;
 pub use solver::{ManoeuvreRecord, Pass, PlanOutcome, PlanRecord, PlanRequest, solve};
 
@@ -551,6 +553,7 @@ impl Navigator {
                 .manoeuvre
                 .as_ref()
                 .is_some_and(manoeuvre::Following::may_hand_back),
+            standing: reuse::Standing::new(pose, obstacles),
         }
     }
 

@@ -177,6 +177,8 @@ pub struct PlanRequest {
     /// after it ([`super::manoeuvre::Following::may_hand_back`]): a feasible polynomial path
     /// takes over from it.
     pub hand_back: bool,
+    /// The car standing among static obstacles: the world [`super::Reuse`] compares.
+    pub standing: Option<super::reuse::Standing>,
 }
 
 /// A finished replanning: the path (None when no feasible path exists) and its
