@@ -337,3 +337,31 @@ fn main() -> Result<()> {
     eprintln!("ugv-example-rust: run over: {end}; last pose {pose:?}");
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    /// The paper scenario's mission.toml as ugv-sim writes it, with a waypoint: what
+    /// the example uses is read, the rest ignored.
+    #[test]
+    fn the_mission_file_is_read() {
+        let text = "version = 1\n[datum]\nlatitude = 37.2307\nlongitude = -77.4197\n\
+            altitude = 40.0\n[start]\nx = 0.0\ny = 0.0\n[goal]\nx = 30.0\ny = 15.0\n\
+            tolerance = 1.0\n[vehicle]\nwheelbase = 1.65\nmax_steer_deg = 35.0\n\
+            max_speed = 6.7\nlength = 2.4\nwidth = 1.2\nrear_overhang = 0.375\n\
+            antenna_x = 0.5\nantenna_y = 0.0\nlaser_x = 2.0\nlaser_y = 0.0\n\
+            laser_yaw_deg = 0.0\n[[waypoints]]\nx = 10.0\ny = 0.0\ntolerance = 1.0\n";
+        let m: super::Mission = toml::from_str(text).expect("mission.toml");
+        assert_eq!(
+            (m.version, m.goal.x, m.goal.y, m.goal.tolerance),
+            (1, 30.0, 15.0, 1.0)
+        );
+        assert_eq!(
+            (m.vehicle.wheelbase, m.vehicle.antenna_x, m.vehicle.laser_x),
+            (1.65, 0.5, 2.0)
+        );
+        assert_eq!(m.datum.latitude, 37.2307);
+        let broken = text.replace("wheelbase = 1.65", "wheelbase = \"long\"");
+        let e = toml::from_str::<super::Mission>(&broken).expect_err("a string wheelbase");
+        assert!(e.to_string().contains("wheelbase"), "{e}");
+    }
+}
