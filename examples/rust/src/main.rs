@@ -2,7 +2,7 @@
 //! Rust, with the project's crates doing the wire work: firmware-bridge opens the GPS
 //! line (NMEA decoded into epochs), the laser's iceoryx2 service and the CAN port, whose
 //! frames golf-car-can's codecs encode and decode with the E2E counter and CRC filled in
-//! and checked; the run's mission.toml is read with serde. What is left here is
+//! and checked; ugv-controller reads the run's controller.toml. What is left here is
 //! the enable sequence and, at each GPS epoch, arcs of constant curvature scored by
 //! their clearance to the laser's points and by the heading towards the goal at their end.
 //!
@@ -15,12 +15,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
-use firmware_bridge::geodesy::{Datum, LocalFrame, course_deg_to_theta, normalize_rad_pi};
+use firmware_bridge::geodesy::{LocalFrame, course_deg_to_theta, normalize_rad_pi};
 use firmware_bridge::nmea::{NmeaLink, ReaderConfig, open_serial};
 use firmware_bridge::{CanPort, GpsReading, LaserFrame, LaserSubscriber, Received};
 use golf_car_can::{CanMessage, ControllerHeartbeat, ControllerHeartbeatState as Hb};
 use golf_car_can::{FaultReport, GolfCarMessage as Msg, SteeringCmd, SteeringReport};
 use golf_car_can::{ThrottleCmd, ThrottleCmdGear, ThrottleReport};
+use ugv_controller::config::{ControllerConfig, Vehicle};
 
 const SPEED: f64 = 1.8; // cruise, m/s
 const LOOK: f64 = 8.0; // length of the arcs scored, m
@@ -40,35 +41,6 @@ struct Wires {
     can: String,
 }
 
-/// mission.toml: what a controller of its own needs of the run (docs/wire-contract.md,
-/// "The mission"); keys this example does not use are ignored.
-#[derive(Debug, serde::Deserialize)]
-struct Mission {
-    version: u32,
-    datum: Datum,
-    goal: Goal,
-    vehicle: Vehicle,
-}
-
-#[derive(Debug, serde::Deserialize)]
-struct Goal {
-    x: f64,
-    y: f64,
-    tolerance: f64,
-}
-
-/// The car: its steering and the GPS antenna's and the laser's mountings.
-#[derive(Debug, serde::Deserialize)]
-struct Vehicle {
-    wheelbase: f64,
-    max_steer_deg: f64,
-    antenna_x: f64,
-    antenna_y: f64,
-    laser_x: f64,
-    laser_y: f64,
-    laser_yaw_deg: f64,
-}
-
 /// The results directory: the argument, or --config's folder.
 fn results_dir() -> Result<PathBuf> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -80,9 +52,9 @@ fn results_dir() -> Result<PathBuf> {
     }
 }
 
-/// The wires and the mission, once the simulator has written its files (the project
-/// controller's controller.toml last).
-fn wires_and_mission(dir: &Path) -> Result<(Wires, Mission)> {
+/// The wires and the configuration, once the simulator has written them all
+/// (controller.toml last).
+fn wires_and_config(dir: &Path) -> Result<(Wires, ControllerConfig)> {
     let (config, deadline) = (dir.join("controller.toml"), Instant::now() + SETUP);
     while !config.is_file() {
         let missing = config.display();
@@ -98,20 +70,14 @@ fn wires_and_mission(dir: &Path) -> Result<(Wires, Mission)> {
     let wires: Wires = serde_json::from_str(&text).with_context(|| format!("{shown}"))?;
     let v = wires.version;
     ensure!(v == 1, "{shown}: version {v}, this example reads 1");
-    let path = dir.join("mission.toml");
-    let shown = path.display();
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {shown}"))?;
-    let mission: Mission = toml::from_str(&text).with_context(|| format!("{shown}"))?;
-    let v = mission.version;
-    ensure!(v == 1, "{shown}: version {v}, this example reads 1");
-    Ok((wires, mission))
+    Ok((wires, ControllerConfig::load(&config)?))
 }
 
 /// The curvature to drive and the clearance it keeps (None: every arc is blocked).
-fn plan(pose: Pose, points: &[Point], mission: &Mission) -> Option<(f64, f64)> {
-    let ((x, y, th), v, m) = (pose, &mission.vehicle, &mission.goal);
+fn plan(pose: Pose, points: &[Point], cfg: &ControllerConfig) -> Option<(f64, f64)> {
+    let ((x, y, th), v, m) = (pose, &cfg.vehicle, &cfg.mission);
     let kmax = v.max_steer_deg.min(30.0).to_radians().tan() / v.wheelbase;
-    let look = (m.x - x).hypot(m.y - y).clamp(2.0, LOOK);
+    let look = (m.goal_x - x).hypot(m.goal_y - y).clamp(2.0, LOOK);
     let mut best: Option<(f64, f64, f64)> = None;
     for k in (0..ARCS).map(|i| kmax * (2.0 * i as f64 / (ARCS - 1) as f64 - 1.0)) {
         let r = if k.abs() < 1e-6 { 1e6 } else { 1.0 / k }; // a straight line: a huge circle
@@ -125,7 +91,7 @@ fn plan(pose: Pose, points: &[Point], mission: &Mission) -> Option<(f64, f64)> {
         let (ex, ey) = ((look / r).sin() * r, (1.0 - (look / r).cos()) * r);
         let (s, c) = th.sin_cos();
         let (wx, wy) = (x + ex * c - ey * s, y + ex * s + ey * c);
-        let cost = normalize_rad_pi((m.y - wy).atan2(m.x - wx) - th - look / r).abs();
+        let cost = normalize_rad_pi((m.goal_y - wy).atan2(m.goal_x - wx) - th - look / r).abs();
         if best.is_none_or(|(least, ..)| cost < least) {
             best = Some((cost, k, clear));
         }
@@ -160,17 +126,14 @@ struct Car {
 impl Car {
     /// An epoch: the antenna's position (GGA) and heading (HDT) as the rear axle's
     /// pose, and the arc to drive from it.
-    fn fix(&mut self, fix: &GpsReading, frame: &LocalFrame, mission: &Mission) {
-        let (good, v) = (
-            fix.quality.is_some_and(|q| q.has_position()),
-            &mission.vehicle,
-        );
+    fn fix(&mut self, fix: &GpsReading, frame: &LocalFrame, cfg: &ControllerConfig) {
+        let (good, v) = (fix.quality.is_some_and(|q| q.has_position()), &cfg.vehicle);
         if let (true, Some(hdt), Some(p)) = (good, fix.heading_deg, fix.enu(frame)) {
             let th = course_deg_to_theta(hdt);
             let (s, c) = th.sin_cos();
             let x = p.east_m - c * v.antenna_x + s * v.antenna_y;
             self.pose = Some((x, p.north_m - s * v.antenna_x - c * v.antenna_y, th));
-            self.drive(mission);
+            self.drive(cfg);
         }
     }
 
@@ -224,17 +187,13 @@ impl Car {
     }
 
     /// At a new fix while driving: the arc to follow, and how fast.
-    fn drive(&mut self, mission: &Mission) {
+    fn drive(&mut self, cfg: &ControllerConfig) {
         let (Some((x, y, th)), State::Drive) = (self.pose, self.state) else {
             return;
         };
-        let arc = plan(
-            (x, y, th),
-            self.points.as_deref().unwrap_or_default(),
-            mission,
-        );
-        let m = &mission.goal;
-        let near = (m.x - x).hypot(m.y - y) < m.tolerance;
+        let arc = plan((x, y, th), self.points.as_deref().unwrap_or_default(), cfg);
+        let m = &cfg.mission;
+        let near = (m.goal_x - x).hypot(m.goal_y - y) < m.goal_tolerance;
         (self.k, self.speed) = match arc {
             Some((k, clear)) if !near => (k, if clear > 2.5 { SPEED } else { 1.0 }),
             _ => (0.0, 0.0),
@@ -278,24 +237,24 @@ impl Car {
 
 /// Drive until the run is over: the GPS line closes, or the ECUs' reports stop (or a
 /// signal); what ended it.
-fn run(mission: &Mission, wires: &Wires, car: &mut Car, stop: &AtomicBool) -> Result<String> {
+fn run(cfg: &ControllerConfig, wires: &Wires, car: &mut Car, stop: &AtomicBool) -> Result<String> {
     let port = open_serial(&wires.gps_link, wires.gps_baud, Duration::ZERO)?;
     let mut gps = NmeaLink::new(port, ReaderConfig::default());
     let laser = LaserSubscriber::new(&wires.laser_service)?; // the simulator's service, with its QoS
     let mut can = CanPort::open(&wires.can)?;
     can.accept_only(&[SteeringReport::ID, ThrottleReport::ID, FaultReport::ID])?;
-    let frame = LocalFrame::new(mission.datum.geodetic())?;
+    let frame = LocalFrame::new(cfg.mission.datum.geodetic())?;
     let (mut tick, mut next_tick) = (0, Instant::now());
     eprintln!("ugv-example-rust: {wires:?}");
     let end = 'run: loop {
         let now = Instant::now();
         match gps.next_fix(Duration::ZERO) {
-            Ok(Some(fix)) => car.fix(&fix, &frame, mission),
+            Ok(Some(fix)) => car.fix(&fix, &frame, cfg),
             Ok(None) => {}
             Err(e) => break 'run format!("the GPS line closed ({e})"),
         }
         if let Some(scan) = laser.try_recv_latest()? {
-            car.scan(&scan, &mission.vehicle);
+            car.scan(&scan, &cfg.vehicle);
         }
         car.receive(&mut can, now);
         let silent = car
@@ -309,7 +268,7 @@ fn run(mission: &Mission, wires: &Wires, car: &mut Car, stop: &AtomicBool) -> Re
         }
         car.step(now);
         if now >= next_tick {
-            car.send(&mut can, tick, mission.vehicle.wheelbase)?;
+            car.send(&mut can, tick, cfg.vehicle.wheelbase)?;
             tick += 1;
             next_tick =
                 (next_tick + Duration::from_millis(10)).max(now - Duration::from_millis(50));
@@ -319,7 +278,7 @@ fn run(mission: &Mission, wires: &Wires, car: &mut Car, stop: &AtomicBool) -> Re
     let rejected = can.stats().rejected();
     if stop.load(Ordering::Relaxed) {
         let idle = Car::default(); // leave the ECUs disabled, braking
-        (0..3).try_for_each(|_| idle.send(&mut can, 0, mission.vehicle.wheelbase))?;
+        (0..3).try_for_each(|_| idle.send(&mut can, 0, cfg.vehicle.wheelbase))?;
     }
     Ok(format!("{end}; rejected {rejected}"))
 }
@@ -327,41 +286,13 @@ fn run(mission: &Mission, wires: &Wires, car: &mut Car, stop: &AtomicBool) -> Re
 fn main() -> Result<()> {
     firmware_bridge::cli::init_logging("warn"); // the crates' warnings; iceoryx2's errors only
     let dir = results_dir()?;
-    let (wires, mission) = wires_and_mission(&dir)?;
+    let (wires, cfg) = wires_and_config(&dir)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))?;
     let mut car = Car::default();
-    let end = run(&mission, &wires, &mut car, &stop)?;
+    let end = run(&cfg, &wires, &mut car, &stop)?;
     let pose = car.pose;
     eprintln!("ugv-example-rust: run over: {end}; last pose {pose:?}");
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    /// The paper scenario's mission.toml as ugv-sim writes it, with a waypoint: what
-    /// the example uses is read, the rest ignored.
-    #[test]
-    fn the_mission_file_is_read() {
-        let text = "version = 1\n[datum]\nlatitude = 37.2307\nlongitude = -77.4197\n\
-            altitude = 40.0\n[start]\nx = 0.0\ny = 0.0\n[goal]\nx = 30.0\ny = 15.0\n\
-            tolerance = 1.0\n[vehicle]\nwheelbase = 1.65\nmax_steer_deg = 35.0\n\
-            max_speed = 6.7\nlength = 2.4\nwidth = 1.2\nrear_overhang = 0.375\n\
-            antenna_x = 0.5\nantenna_y = 0.0\nlaser_x = 2.0\nlaser_y = 0.0\n\
-            laser_yaw_deg = 0.0\n[[waypoints]]\nx = 10.0\ny = 0.0\ntolerance = 1.0\n";
-        let m: super::Mission = toml::from_str(text).expect("mission.toml");
-        assert_eq!(
-            (m.version, m.goal.x, m.goal.y, m.goal.tolerance),
-            (1, 30.0, 15.0, 1.0)
-        );
-        assert_eq!(
-            (m.vehicle.wheelbase, m.vehicle.antenna_x, m.vehicle.laser_x),
-            (1.65, 0.5, 2.0)
-        );
-        assert_eq!(m.datum.latitude, 37.2307);
-        let broken = text.replace("wheelbase = 1.65", "wheelbase = \"long\"");
-        let e = toml::from_str::<super::Mission>(&broken).expect_err("a string wheelbase");
-        assert!(e.to_string().contains("wheelbase"), "{e}");
-    }
 }
