@@ -114,7 +114,6 @@ pub use solver::{ManoeuvreRecord, Pass, PlanOutcome, PlanRecord, PlanRequest, so
 
 use crate::config::ControllerConfig;
 use crate::localisation::Pose;
-use crate::perception::SEEN_CELL;
 use crate::planner::{self, PlanProblem, Trajectory};
 use crate::route::{Route, RoutePoint};
 use frame::{clear_at, clip_to_start, wrap};
@@ -900,10 +899,11 @@ impl Navigator {
         let off = (py - path.y(x)).abs();
         let heading = wrap(pose.theta - self.frame.angle - path.heading(x)).abs();
         let left = path.x_f() - x;
-        let (ex, ey) = self.frame.to_world(path.x_f(), path.y(path.x_f()));
-        let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
-        let at_goal = (ex - goal.0).hypot(ey - goal.1) <= KEEP_AT_GOAL;
-        if off > KEEP_OFF_PATH || heading > KEEP_HEADING || (left < KEEP_LEFT && !at_goal) {
+        let short = left < KEEP_LEFT && {
+            let (ex, ey) = self.frame.to_world(path.x_f(), path.y(path.x_f()));
+            self.to_goal(ex, ey) > KEEP_AT_GOAL
+        };
+        if off > KEEP_OFF_PATH || heading > KEEP_HEADING || short {
             return false;
         }
         let n = (left / KEEP_CHECK_STEP).ceil() as usize;
@@ -1128,14 +1128,8 @@ impl Navigator {
         if self.seen_at.is_none() {
             let pc = &self.cfg.planner;
             let (depth, width) = (pc.seen_behind_at_start_m, pc.seen_behind_at_start_width_m);
-            // A cell is marked where any point of the rectangle lies in it, so the marks
-            // reached up to a cell's extent along the car's heading past its far end
-            // (under GPS noise a reversal ended 0.1 m from a cart 0.4 m beyond it): the
-            // rectangle is marked half that shorter, so that they reach at most half a
-            // cell's extent past it, as where a cell is marked by its centre.
-            let reach = SEEN_CELL / 2.0 * (car[2].cos().abs() + car[2].sin().abs());
             self.seen
-                .mark_rectangle(car, f.rear + (depth - reach).max(0.0), -f.rear, width / 2.0);
+                .mark_checked_behind(car, f.rear, depth, width / 2.0);
         }
         self.seen.mark_rectangle(car, f.rear, f.front, f.half_width);
         self.seen.update(scan, laser);
@@ -1202,12 +1196,16 @@ impl Navigator {
         self.follow_ahead(pose, pose)
     }
 
+    /// The distance from (x, y) to the mission's goal, metres.
+    fn to_goal(&self, x: f64, y: f64) -> f64 {
+        (x - self.cfg.mission.goal_x).hypot(y - self.cfg.mission.goal_y)
+    }
+
     /// Follow the current path: arrival, progress, passing the goal and the approach
     /// speed from `pose` (where the car is), steering from `ahead` (where it will be when
     /// the command acts: the pose propagated over the steering dead time).
     pub fn follow_ahead(&mut self, pose: &Pose, ahead: &Pose) -> Guidance {
-        let goal = (self.cfg.mission.goal_x, self.cfg.mission.goal_y);
-        let to_goal = (pose.x - goal.0).hypot(pose.y - goal.1);
+        let to_goal = self.to_goal(pose.x, pose.y);
         self.progress = self.progress_at(pose);
         // Arrival and "passed the goal" by progress along the whole route, never by one
         // leg nor the distance alone: a route whose goal lies near or behind its start
@@ -1390,7 +1388,7 @@ mod tests {
     }
 
     /// The default configuration with the goal at (goal_x, 0): a straight mission east.
-    fn east_to(goal_x: f64) -> ControllerConfig {
+    pub(super) fn east_to(goal_x: f64) -> ControllerConfig {
         let mut cfg = ControllerConfig::default();
         cfg.mission.goal_x = goal_x;
         cfg.mission.goal_y = 0.0;
@@ -1398,7 +1396,7 @@ mod tests {
     }
 
     /// The car at (x, y) heading `theta`, at speed `v`, wheels straight.
-    fn car_at(x: f64, y: f64, theta: f64, v: f64) -> Pose {
+    pub(super) fn car_at(x: f64, y: f64, theta: f64, v: f64) -> Pose {
         Pose {
             x,
             y,
@@ -1409,7 +1407,7 @@ mod tests {
     }
 
     /// A static post.
-    fn post(x: f64, y: f64, radius: f64) -> planner::Obstacle {
+    pub(super) fn post(x: f64, y: f64, radius: f64) -> planner::Obstacle {
         planner::Obstacle {
             x,
             y,
@@ -2072,13 +2070,13 @@ mod tests {
                     .seen(car[0] + u * c - v * s, car[1] + u * s + v * c)
             };
             let depth = pc.seen_behind_at_start_m;
-            let half_cell = SEEN_CELL / 2.0 * (c.abs() + s.abs());
+            let half_cell = crate::perception::SEEN_CELL / 2.0 * (c.abs() + s.abs());
             for v in [-0.5, 0.0, 0.5] {
                 for past in [0.01, 0.1, 0.2, 0.3].map(|d| half_cell + d) {
                     assert!(!behind(depth + past, v), "heading {heading}: {past} m past");
                 }
                 assert!(
-                    behind(depth - 2.0 * SEEN_CELL, v),
+                    behind(depth - 2.0 * crate::perception::SEEN_CELL, v),
                     "heading {heading}: inside"
                 );
             }

@@ -150,48 +150,24 @@ fn keep(req: &PlanRequest, outcome: &PlanOutcome) -> Option<Standing> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::{car_at, east_to, post};
     use super::*;
 
-    fn post(x: f64, y: f64, radius: f64) -> Obstacle {
-        Obstacle {
-            x,
-            y,
-            radius,
-            vx: 0.0,
-            vy: 0.0,
-        }
-    }
-
     fn standing(x: f64, obstacles: &[Obstacle]) -> Standing {
-        let pose = Pose {
-            x,
-            y: 0.0,
-            theta: 0.0,
-            v: 0.0,
-            phi: 0.0,
-        };
-        Standing::new(&pose, obstacles).expect("standing")
+        Standing::new(&car_at(x, 0.0, 0.0, 0.0), obstacles).expect("standing")
     }
 
     /// A navigator east to (40, 0), and a wall of posts across the route at x = 6.
     fn blocked() -> (super::super::Navigator, Vec<Obstacle>) {
-        let mut cfg = crate::config::ControllerConfig::default();
-        cfg.mission.goal_x = 40.0;
-        cfg.mission.goal_y = 0.0;
         let wall = (-50..=50)
             .map(|k| post(6.0, f64::from(k) * 0.4, 0.3))
             .collect();
-        (super::super::Navigator::new(&cfg).expect("navigator"), wall)
+        let nav = super::super::Navigator::new(&east_to(40.0)).expect("navigator");
+        (nav, wall)
     }
 
     fn car(x: f64, v: f64) -> Pose {
-        Pose {
-            x,
-            y: 0.0,
-            theta: 0.0,
-            v,
-            phi: 0.0,
-        }
+        car_at(x, 0.0, 0.0, v)
     }
 
     fn no_path(outcome: &PlanOutcome) -> &super::super::PlanRecord {
