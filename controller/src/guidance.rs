@@ -539,6 +539,7 @@ impl Navigator {
             steer_limit: limit,
             frame,
             detours,
+            sight: self.cfg.perception.detection_radius,
             passages,
             footprint: self.footprint(),
             goal_blocked,
@@ -2422,6 +2423,36 @@ mod tests {
         req.manoeuvre = None;
         let (trajectory, record) = solve(&req).result.expect("planned");
         assert!(trajectory.is_none() && !record.feasible, "{record:?}");
+    }
+
+    #[test]
+    fn a_gate_seen_at_the_edge_of_the_sight_is_driven_through_not_round_its_posts() {
+        // A fence across the route with a gate of car width + 2 m, 7.8 m ahead: the
+        // laser's 8 m show only the posts' ends. A detour round them would lead through
+        // the fence beyond; the path goes through the gate.
+        let cfg = east_to(40.0);
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let pose = car_at(12.2, 0.0, 0.0, 2.0);
+        let sight = cfg.perception.detection_radius;
+        let seen: Vec<planner::Obstacle> =
+            fence(cfg.vehicle.width + 2.0, cfg.planner.passage_margin)
+                .into_iter()
+                .filter(|o| (o.x - pose.x).hypot(o.y - pose.y) - o.radius <= sight)
+                .collect();
+        assert!(
+            !seen.is_empty() && seen.iter().all(|o| o.y.abs() < 2.5),
+            "{seen:?}"
+        );
+        drive_east(&mut nav, 12);
+        let outcome = solve(&nav.request(0.0, &pose, &seen));
+        let (trajectory, record) = outcome.result.clone().expect("planned");
+        let p = trajectory.expect("a path").path().clone();
+        let through = (0..=100)
+            .map(|j| p.x_k() + p.span() * f64::from(j) / 100.0)
+            .map(|x| outcome.frame.to_world(x, p.y(x)))
+            .filter(|(wx, _)| (wx - 20.0).abs() < 0.2)
+            .all(|(_, wy)| wy.abs() < 1.0);
+        assert!(through, "{record:?}");
     }
 
     #[test]

@@ -146,6 +146,9 @@ pub struct PlanRequest {
     /// Problems towards other local goals (with their frames), tried in order when
     /// `problem` has no feasible path.
     pub detours: Vec<(PlanProblem, PathFrame)>,
+    /// How far perception reports static obstacles, metres: a detour's path passes the
+    /// obstacles in view only within it ([`in_sight`]).
+    pub sight: f64,
     /// Problems through passages (with their frames), tried in order when neither
     /// `problem` nor a detour has a feasible path: planned with the car's half width
     /// plus the passage margin as the circle, each candidate path checked with
@@ -371,7 +374,11 @@ fn solve_in_order(req: &PlanRequest) -> PlanOutcome {
     }
     for (problem, frame) in &req.detours {
         let outcome = towards(problem, *frame, None);
-        if !no_path(&outcome) {
+        let seen = match &outcome.result {
+            Ok((Some(t), _)) => in_sight(problem, t, req.sight),
+            _ => true,
+        };
+        if !no_path(&outcome) && seen {
             return outcome;
         }
     }
@@ -750,6 +757,28 @@ fn solve_towards(
         }
     }
     Ok(record(req.time, frame, best.map(|b| b.1), true))
+}
+
+/// Whether the path `t` of `problem` passes the static obstacles in view within `sight`
+/// of the car (metres): every point of it up to the farthest obstacle's far side (along
+/// the frame's x) lies within `sight`. Beyond, perception reports nothing, so a detour
+/// swinging wide round the ends of a fence seen at the edge of the sight would pass
+/// where the rest of that fence may stand (a gate's posts seen first from 8 m: the
+/// detour round them led through the fence beside the gate).
+fn in_sight(problem: &PlanProblem, t: &Trajectory, sight: f64) -> bool {
+    let (sx, sy) = (problem.state.x, problem.state.y);
+    let p = t.path();
+    let reach = problem
+        .obstacles
+        .iter()
+        .filter(|o| o.vx == 0.0 && o.vy == 0.0)
+        .map(|o| o.x + o.radius)
+        .fold(f64::NEG_INFINITY, f64::max)
+        .min(p.x_f());
+    (0..=40)
+        .map(|j| p.x_k() + p.span() * f64::from(j) / 40.0)
+        .take_while(|&x| x <= reach)
+        .all(|x| (x - sx).hypot(p.y(x) - sy) <= sight)
 }
 
 /// Whether a static obstacle of `problem` lying beyond `reach` (the car's nose, x in
