@@ -342,27 +342,26 @@ fn classify(
     segments: &mut Vec<SegmentMeasurement>,
 ) {
     let n = pts.len();
-    if n >= cfg.circle_min_points && !too_long_for_a_post(pts, cfg) {
-        let line = fit_line(pts);
-        if let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
-            && is_post(&c, line.as_ref(), pts, origin, cfg)
-        {
-            circles.push(CircleMeasurement {
-                centre: c.centre,
-                radius: c.radius,
-                centre_covariance: [
-                    [c.covariance[0][0], c.covariance[0][1]],
-                    [c.covariance[1][0], c.covariance[1][1]],
-                ],
-                radius_variance: c.covariance[2][2],
-                kind: ObstacleKind::Post,
-                rms: c.rms,
-                points: n,
-                cluster,
-                truncated: false,
-            });
-            return;
-        }
+    if n >= cfg.circle_min_points
+        && !too_long_for_a_post(pts, cfg)
+        && let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
+        && is_post(&c, pts, origin, cfg)
+    {
+        circles.push(CircleMeasurement {
+            centre: c.centre,
+            radius: c.radius,
+            centre_covariance: [
+                [c.covariance[0][0], c.covariance[0][1]],
+                [c.covariance[1][0], c.covariance[1][1]],
+            ],
+            radius_variance: c.covariance[2][2],
+            kind: ObstacleKind::Post,
+            rms: c.rms,
+            points: n,
+            cluster,
+            truncated: false,
+        });
+        return;
     }
     if n >= cfg.line_min_points {
         for piece in split_and_merge(pts, cfg.split_distance) {
@@ -417,13 +416,9 @@ fn too_long_for_a_post(pts: &[[f64; 2]], cfg: &PerceptionConfig) -> bool {
     far(first, middle) || far(first, last) || far(middle, last)
 }
 
-fn is_post(
-    c: &CircleFit,
-    line: Option<&LineFit>,
-    pts: &[[f64; 2]],
-    origin: [f64; 2],
-    cfg: &PerceptionConfig,
-) -> bool {
+/// Whether the circle `c` fitted to `pts` makes them a post; the line fit, the last
+/// test, is made only for a circle that passes the others.
+fn is_post(c: &CircleFit, pts: &[[f64; 2]], origin: [f64; 2], cfg: &PerceptionConfig) -> bool {
     if !(c.radius >= cfg.circle_radius_min && c.radius <= cfg.circle_radius_max) {
         return false;
     }
@@ -451,7 +446,7 @@ fn is_post(
     if c.covariance[2][2].sqrt() > cfg.circle_radius_sigma_max {
         return false;
     }
-    line.is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
+    fit_line(pts).is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
 }
 
 fn segment(l: &LineFit, points: usize, cluster: usize) -> SegmentMeasurement {
