@@ -201,18 +201,17 @@ impl View {
         if !(0.0..=last).contains(&k) {
             return Seen::Unknown;
         }
-        let (Some((h0, r0)), Some((h1, r1))) = (hit(k.floor() as usize), hit(k.ceil() as usize))
-        else {
+        let (Some((h0, r0)), Some((h1, r1))) = (hit(beam_floor(k)), hit(beam_ceil(k))) else {
             return Seen::Unknown;
         };
         let near = |h: Option<[f64; 2]>| h.is_some_and(|h| distance(h, p) <= tolerance);
-        let on_chord = match (h0, h1) {
+        let on_chord = || match (h0, h1) {
             (Some(a), Some(b)) => {
                 distance(a, b) <= CHORD_MAX && distance_to_segment(p, a, b) <= tolerance
             }
             _ => false,
         };
-        if near(h0) || near(h1) || on_chord {
+        if near(h0) || near(h1) || on_chord() {
             Seen::Surface
         } else if r0.min(r1) > d + tolerance {
             Seen::Free
@@ -220,6 +219,20 @@ impl View {
             Seen::Unknown
         }
     }
+}
+
+/// `k.floor() as usize` for a beam index `k` in `[0, 2^52]`: the conversion truncates,
+/// which for a non-negative number is the floor (the build's target has no rounding
+/// instruction, and `floor` is a call of some 25 instructions).
+fn beam_floor(k: f64) -> usize {
+    k as usize
+}
+
+/// `k.ceil() as usize` for a beam index `k` in `[0, 2^52]`: the floor, one more when
+/// `k` has a fraction.
+fn beam_ceil(k: f64) -> usize {
+    let floor = k as usize;
+    if (floor as f64) < k { floor + 1 } else { floor }
 }
 
 /// One beam of a [`View`] in the world frame: its hit point (None: no return within
@@ -291,9 +304,12 @@ pub(super) fn detect_with(
     let mut segments = Vec::new();
     let last_beam = scan.ranges.len().saturating_sub(1);
     let edge = |p: Option<&ScanPoint>| p.is_some_and(|p| p.beam == 0 || p.beam == last_beam);
+    // One buffer for every cluster's world points.
+    let mut world = Vec::new();
     for (index, range) in clusters.iter().enumerate() {
         let cluster = &points[range.clone()];
-        let world: Vec<[f64; 2]> = cluster.iter().map(|p| p.world).collect();
+        world.clear();
+        world.extend(cluster.iter().map(|p| p.world));
         let from = circles.len();
         classify(&world, origin, index, cfg, &mut circles, &mut segments);
         let truncated = edge(cluster.first()) || edge(cluster.last());
@@ -326,27 +342,26 @@ fn classify(
     segments: &mut Vec<SegmentMeasurement>,
 ) {
     let n = pts.len();
-    if n >= cfg.circle_min_points && !too_long_for_a_post(pts, cfg) {
-        let line = fit_line(pts);
-        if let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
-            && is_post(&c, line.as_ref(), pts, origin, cfg)
-        {
-            circles.push(CircleMeasurement {
-                centre: c.centre,
-                radius: c.radius,
-                centre_covariance: [
-                    [c.covariance[0][0], c.covariance[0][1]],
-                    [c.covariance[1][0], c.covariance[1][1]],
-                ],
-                radius_variance: c.covariance[2][2],
-                kind: ObstacleKind::Post,
-                rms: c.rms,
-                points: n,
-                cluster,
-                truncated: false,
-            });
-            return;
-        }
+    if n >= cfg.circle_min_points
+        && !too_long_for_a_post(pts, cfg)
+        && let Some(c) = fit_circle(pts, cfg.range_noise_sigma)
+        && is_post(&c, pts, origin, cfg)
+    {
+        circles.push(CircleMeasurement {
+            centre: c.centre,
+            radius: c.radius,
+            centre_covariance: [
+                [c.covariance[0][0], c.covariance[0][1]],
+                [c.covariance[1][0], c.covariance[1][1]],
+            ],
+            radius_variance: c.covariance[2][2],
+            kind: ObstacleKind::Post,
+            rms: c.rms,
+            points: n,
+            cluster,
+            truncated: false,
+        });
+        return;
     }
     if n >= cfg.line_min_points {
         for piece in split_and_merge(pts, cfg.split_distance) {
@@ -401,13 +416,9 @@ fn too_long_for_a_post(pts: &[[f64; 2]], cfg: &PerceptionConfig) -> bool {
     far(first, middle) || far(first, last) || far(middle, last)
 }
 
-fn is_post(
-    c: &CircleFit,
-    line: Option<&LineFit>,
-    pts: &[[f64; 2]],
-    origin: [f64; 2],
-    cfg: &PerceptionConfig,
-) -> bool {
+/// Whether the circle `c` fitted to `pts` makes them a post; the line fit, the last
+/// test, is made only for a circle that passes the others.
+fn is_post(c: &CircleFit, pts: &[[f64; 2]], origin: [f64; 2], cfg: &PerceptionConfig) -> bool {
     if !(c.radius >= cfg.circle_radius_min && c.radius <= cfg.circle_radius_max) {
         return false;
     }
@@ -435,7 +446,7 @@ fn is_post(
     if c.covariance[2][2].sqrt() > cfg.circle_radius_sigma_max {
         return false;
     }
-    line.is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
+    fit_line(pts).is_none_or(|l| l.rms > cfg.circle_line_ratio * c.rms)
 }
 
 fn segment(l: &LineFit, points: usize, cluster: usize) -> SegmentMeasurement {
@@ -581,6 +592,23 @@ mod tests {
                 view.surface_at(&laser, p, 0.06),
                 "{p:?}"
             );
+        }
+    }
+
+    #[test]
+    fn beam_floor_and_ceil_are_those_of_the_float() {
+        let ks = (0..20_000).map(|i| f64::from(i) * 0.0271).chain([
+            0.0,
+            1.0,
+            540.0,
+            1.0f64.next_down(),
+            1.0f64.next_up(),
+            539.999_999_999_999_9,
+            f64::MIN_POSITIVE,
+        ]);
+        for k in ks {
+            assert_eq!(beam_floor(k), k.floor() as usize, "{k}");
+            assert_eq!(beam_ceil(k), k.ceil() as usize, "{k}");
         }
     }
 

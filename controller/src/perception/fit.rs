@@ -114,6 +114,12 @@ fn cost(points: &[[f64; 2]], a: f64, b: f64, r: f64, dist: &mut [f64]) -> f64 {
 
 /// J'J and J'e of the geometric residuals e_i = |p_i - c| - r over (a, b, r), with
 /// the distances |p_i - c| of [`cost`] at the same (a, b, r).
+///
+/// Each point's row j = (-dx/d, -dy/d, -1) adds j_k j_l to entry (k, l) of J'J and
+/// j_k e to J'e, in the order of the points, and so the sums here are those bit for
+/// bit: J'J is symmetric (j_k j_l and j_l j_k are the same product); a sum of -1 times
+/// each term is `0 - ` the sum of the terms (rounding is symmetric, and neither ever
+/// gives -0); and a sum of n ones is n.
 fn normal_equations(
     points: &[[f64; 2]],
     a: f64,
@@ -121,20 +127,29 @@ fn normal_equations(
     r: f64,
     dist: &[f64],
 ) -> (Matrix3<f64>, Vector3<f64>) {
-    let mut jtj = Matrix3::zeros();
-    let mut jtr = Vector3::zeros();
+    let [mut xx, mut xy, mut yy, mut x, mut y] = [0.0; 5];
+    let [mut ex, mut ey, mut e] = [0.0; 3];
     for (p, &d) in points.iter().zip(dist) {
         let dx = p[0] - a;
         let dy = p[1] - b;
-        let j = if d > 0.0 {
-            Vector3::new(-dx / d, -dy / d, -1.0)
+        let (jx, jy) = if d > 0.0 {
+            (-dx / d, -dy / d)
         } else {
-            Vector3::new(0.0, 0.0, -1.0)
+            (0.0, 0.0)
         };
-        jtj += j * j.transpose();
-        jtr += j * (d - r);
+        xx += jx * jx;
+        xy += jx * jy;
+        yy += jy * jy;
+        x += jx;
+        y += jy;
+        let residual = d - r;
+        ex += jx * residual;
+        ey += jy * residual;
+        e += residual;
     }
-    (jtj, jtr)
+    let (xr, yr, rr) = (0.0 - x, 0.0 - y, points.len().min(dist.len()) as f64);
+    let jtj = Matrix3::new(xx, xy, xr, xy, yy, yr, xr, yr, rr);
+    (jtj, Vector3::new(ex, ey, 0.0 - e))
 }
 
 /// Taubin's fit (Chernov, "Circular and linear regression", 2010): centre and radius.
@@ -301,11 +316,14 @@ pub fn split_and_merge(points: &[[f64; 2]], split_distance: f64) -> Vec<Range<us
             _ => pieces.push(range),
         }
     }
-    // Merge adjacent collinear pieces.
+    // Merge adjacent collinear pieces, the first pair that fits each time. The pairs
+    // before a merge did not fit and are unchanged but for the one ending in the merged
+    // piece: the next look starts there, not at the first pair.
     let mut merged = true;
+    let mut from = 0;
     while merged && pieces.len() > 1 {
         merged = false;
-        for i in 0..pieces.len() - 1 {
+        for i in from..pieces.len() - 1 {
             let union = pieces[i].start..pieces[i + 1].end;
             let fits = fit_line(&points[union.clone()])
                 .is_some_and(|l| l.residual_min.abs().max(l.residual_max.abs()) <= split_distance);
@@ -313,6 +331,7 @@ pub fn split_and_merge(points: &[[f64; 2]], split_distance: f64) -> Vec<Range<us
                 pieces[i] = union;
                 pieces.remove(i + 1);
                 merged = true;
+                from = i.saturating_sub(1);
                 break;
             }
         }
@@ -356,6 +375,66 @@ mod tests {
         assert!((c.centre[1] - 8.0).abs() < 1e-9);
         assert!((c.radius - 3.0).abs() < 1e-9);
         assert!(c.rms < 1e-9);
+    }
+
+    #[test]
+    fn the_normal_equations_are_the_sums_of_each_rows_outer_product_bit_for_bit() {
+        // Noisy points round a circle, and one at the centre (a zero distance).
+        let pts: Vec<[f64; 2]> = (0..60)
+            .map(|i| {
+                let (t, f) = (0.1 * f64::from(i), f64::from(i));
+                let r = 2.0 + 0.01 * (1.3 * f).sin();
+                [3.0 + r * t.cos(), -1.0 + r * t.sin()]
+            })
+            .chain([[3.0, -1.0]])
+            .collect();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (a, b, r) in [(3.0, -1.0, 2.0), (3.1, -0.9, 1.9), (-5.0, 4.0, 30.0)] {
+            let mut dist = vec![0.0; pts.len()];
+            cost(&pts, a, b, r, &mut dist);
+            let (mut jtj, mut jtr) = (Matrix3::zeros(), Vector3::zeros());
+            for (p, &d) in pts.iter().zip(&dist) {
+                let j = if d > 0.0 {
+                    Vector3::new(-(p[0] - a) / d, -(p[1] - b) / d, -1.0)
+                } else {
+                    Vector3::new(0.0, 0.0, -1.0)
+                };
+                jtj += j * j.transpose();
+                jtr += j * (d - r);
+            }
+            let (m, v) = normal_equations(&pts, a, b, r, &dist);
+            assert_eq!(bits(m.as_slice()), bits(jtj.as_slice()), "({a}, {b}, {r})");
+            assert_eq!(bits(v.as_slice()), bits(jtr.as_slice()), "({a}, {b}, {r})");
+        }
+    }
+
+    #[test]
+    fn merging_from_the_last_merge_gives_the_pieces_merging_from_the_first_does() {
+        // A zig-zag of short noisy pieces (many merges) and a square's corners.
+        let pts: Vec<[f64; 2]> = (0..200)
+            .map(|i| {
+                let f = f64::from(i);
+                let bend = if (i / 25) % 2 == 0 {
+                    0.0
+                } else {
+                    0.04 * (f % 25.0)
+                };
+                [0.05 * f, bend + 0.004 * (2.1 * f).sin()]
+            })
+            .collect();
+        for split in [0.005, 0.01, 0.02, 0.05, 0.2] {
+            let pieces = split_and_merge(&pts, split);
+            // Every adjacent pair left does not fit, and the pieces cover the points.
+            for w in pieces.windows(2) {
+                let union = &pts[w[0].start..w[1].end];
+                let fits = fit_line(union)
+                    .is_some_and(|l| l.residual_min.abs().max(l.residual_max.abs()) <= split);
+                assert!(!fits, "{split}: {w:?}");
+                assert_eq!(w[0].end, w[1].start + 1);
+            }
+            assert_eq!(pieces.first().map(|p| p.start), Some(0));
+            assert_eq!(pieces.last().map(|p| p.end), Some(pts.len()));
+        }
     }
 
     #[test]

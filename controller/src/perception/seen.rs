@@ -85,9 +85,10 @@ fn cell(x: f64, y: f64) -> (i64, i64) {
 }
 
 /// The cells a ray from (x, y) in the direction (c, s) (a unit vector) crosses over
-/// `length` metres, in order, onto `out` (Amanatides and Woo's traversal: one step per
-/// cell, no rounding per point).
-fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64)>) {
+/// `length` metres, in order (Amanatides and Woo's traversal: one step per cell, no
+/// rounding per point), each yielded as the ray reaches it, so that the cells are
+/// marked as they come rather than gathered first.
+fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64) -> impl Iterator<Item = (i64, i64)> {
     let (mut i, mut j) = cell(x, y);
     let last = cell(x + length * c, y + length * s);
     let axis = |p: f64, d: f64, k: i64| {
@@ -102,19 +103,23 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64, out: &mut Vec<(i64, i64
     let (sj, mut tj, dj) = axis(y, s, j);
     // A ray crosses at most this many cells (the guard against rounding at the end).
     let bound = ((length / CELL) * 2.0).ceil() as usize + 2;
-    for _ in 0..bound {
-        out.push((i, j));
-        if (i, j) == last {
-            break;
+    let mut arrived = false;
+    (0..bound).map_while(move |_| {
+        if arrived {
+            return None;
         }
-        if ti < tj {
+        let here = (i, j);
+        if here == last {
+            arrived = true;
+        } else if ti < tj {
             ti += di;
             i += si;
         } else {
             tj += dj;
             j += sj;
         }
-    }
+        Some(here)
+    })
 }
 
 type Chunks = ChunkMap<[u32; CHUNK as usize]>;
@@ -143,23 +148,20 @@ fn get(chunks: &Chunks, cell: (i64, i64)) -> bool {
 impl SeenSpace {
     /// Cells seen free, in the order of a ray or a row (neighbours mostly share a
     /// chunk, looked up once for them): no obstacle remembered there either.
-    fn mark_cells(&mut self, cells: &[(i64, i64)]) {
-        let mut rest = cells;
-        while let Some(&first) = rest.first() {
+    fn mark_cells(&mut self, cells: impl IntoIterator<Item = (i64, i64)>) {
+        let mut cells = cells.into_iter().peekable();
+        while let Some(&first) = cells.peek() {
             let key = chunk_of(first);
             let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
             let mut hits = self.hits.get_mut(&key);
             // One pass over the run of cells in this chunk.
-            let mut n = 0;
-            for &c in rest.iter().take_while(|&&c| chunk_of(c) == key) {
+            while let Some(c) = cells.next_if(|&c| chunk_of(c) == key) {
                 let (u, v) = within(c);
                 seen[v] |= 1 << u;
                 if let Some(h) = hits.as_deref_mut() {
                     h[v][u] = h[v][u].saturating_sub(PASS_LOSS);
                 }
-                n += 1;
             }
-            rest = &rest[n..];
         }
     }
 
@@ -214,7 +216,6 @@ impl SeenSpace {
         let every = (BEAM_SPACING / scan.angle_increment.abs().max(1e-6))
             .ceil()
             .max(1.0) as usize;
-        let mut ray = Vec::with_capacity(128);
         for i in (0..n).step_by(every) {
             let a = laser.yaw + scan.beam_angle(i);
             let (c, s) = (a.cos(), a.sin());
@@ -224,9 +225,7 @@ impl SeenSpace {
                 Beam::NoReturn => (REACH.min(scan.range_max), None),
                 Beam::Dropout => continue,
             };
-            ray.clear();
-            traverse(laser.x, laser.y, c, s, reach.max(0.0), &mut ray);
-            self.mark_cells(&ray);
+            self.mark_cells(traverse(laser.x, laser.y, c, s, reach.max(0.0)));
             if let Some(r) = hit {
                 self.returned(cell(laser.x + r * c, laser.y + r * s));
             }
@@ -251,15 +250,12 @@ impl SeenSpace {
         let (c, s) = (pose[2].cos(), pose[2].sin());
         let nu = ((back + front) / (CELL / 2.0)).ceil() as usize;
         let nv = (2.0 * half_width / (CELL / 2.0)).ceil() as usize;
-        let mut row = Vec::with_capacity(nv + 1);
         for a in 0..=nu {
             let u = -back + (back + front) * a as f64 / nu as f64;
-            row.clear();
-            row.extend((0..=nv).map(|b| {
+            self.mark_cells((0..=nv).map(|b| {
                 let v = -half_width + 2.0 * half_width * b as f64 / nv as f64;
                 cell(pose[0] + u * c - v * s, pose[1] + u * s + v * c)
             }));
-            self.mark_cells(&row);
         }
     }
 
@@ -407,12 +403,10 @@ mod tests {
 
     #[test]
     fn a_ray_crosses_every_cell_on_its_way_once_in_order() {
-        let mut out = Vec::new();
-        traverse(0.1, 0.1, 1.0, 0.0, 1.0, &mut out);
+        let out: Vec<_> = traverse(0.1, 0.1, 1.0, 0.0, 1.0).collect();
         assert_eq!(out, vec![(0, 0), (1, 0), (2, 0), (3, 0), (4, 0)]);
-        out.clear();
         let (c, s) = (-0.6, -0.8);
-        traverse(0.1, 0.1, c, s, 2.0, &mut out);
+        let out: Vec<_> = traverse(0.1, 0.1, c, s, 2.0).collect();
         assert_eq!(out.first(), Some(&(0, 0)));
         assert_eq!(out.last(), Some(&cell(0.1 + 2.0 * c, 0.1 + 2.0 * s)));
         // Each step moves to a neighbour across one side.

@@ -363,9 +363,16 @@ const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
 /// never a part where the earlier beams passed. An object moving at more than
 /// [`STILL_SPEED`] leaves its surface: crossing, its leading side stands where the
 /// beams passed; coming or going, most of its hits are off the earlier surface.
+///
+/// The hits are looked at in order until the answer is settled whatever the rest
+/// show: the counts only grow, so too many in free space or too few left to make half
+/// on a surface is no, and enough on a surface with too few left to make a tenth in
+/// free space is yes.
 fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]) -> bool {
+    let n = points.len();
+    let still = |surface: usize, free: usize| surface >= 2 && 2 * surface >= n && 10 * free <= n;
     let (mut surface, mut free) = (0usize, 0usize);
-    for p in points {
+    for (i, p) in points.iter().enumerate() {
         match past
             .view
             .surface_at_cached(&past.laser, p.world, STILL_TOLERANCE, hits)
@@ -374,9 +381,15 @@ fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]
             Seen::Free => free += 1,
             Seen::Unknown => {}
         }
+        let rest = n - i - 1;
+        if 10 * free > n || 2 * (surface + rest) < n || surface + rest < 2 {
+            return false;
+        }
+        if still(surface, free + rest) {
+            return true;
+        }
     }
-    let n = points.len();
-    surface >= 2 && 2 * surface >= n && 10 * free <= n
+    still(surface, free)
 }
 
 /// `velocity` once it has been significant since `moving_since` for
@@ -1375,6 +1388,62 @@ mod tests {
         }
         assert!(all.len() > 90);
         assert_eq!(gate(&tracks, &circles, &cfg), all);
+    }
+
+    #[test]
+    fn a_cluster_is_judged_still_as_counting_all_its_hits_judges_it() {
+        // A wall 5 m ahead across 61 beams, with a gap of no returns and a nearer object.
+        let mut ranges: Vec<f32> = (0..61)
+            .map(|i| (5.0 / (f64::from(i) - 30.0).to_radians().cos()) as f32)
+            .collect();
+        ranges[40..46].fill(f32::INFINITY);
+        ranges[10..14].fill(3.0);
+        let past = PastView {
+            stamp: 0.0,
+            laser: Pose2::new(0.0, 0.0, 0.0),
+            view: View {
+                angle_min: -30f64.to_radians(),
+                angle_increment: 1f64.to_radians(),
+                range_max: 20.0,
+                ranges,
+            },
+        };
+        // Runs of hits on the wall, near it, in front of it and behind it.
+        let points: Vec<ScanPoint> = (0..150u32)
+            .map(|i| {
+                let f = f64::from(i);
+                let x = 5.0 + [0.0, 0.02, -0.5, 0.5][((i / 7 + i / 11) % 4) as usize];
+                let world = [x, x * (-35.0 + 0.5 * f).to_radians().tan()];
+                ScanPoint {
+                    beam: i as usize,
+                    range: 0.0,
+                    angle: 0.0,
+                    laser: world,
+                    vehicle: world,
+                    world,
+                }
+            })
+            .collect();
+        let counted = |c: &[ScanPoint]| {
+            let seen: Vec<Seen> = c
+                .iter()
+                .map(|p| past.view.surface_at(&past.laser, p.world, STILL_TOLERANCE))
+                .collect();
+            let count = |s: Seen| seen.iter().filter(|&&x| x == s).count();
+            let (surface, free, n) = (count(Seen::Surface), count(Seen::Free), c.len());
+            surface >= 2 && 2 * surface >= n && 10 * free <= n
+        };
+        let mut hits = past.view.hit_cache();
+        let mut answers = [0; 2];
+        for start in 0..points.len() {
+            for len in [0, 1, 2, 3, 5, 8, 13, 21, 40, 150] {
+                let c = &points[start..(start + len).min(points.len())];
+                let still = cluster_still(c, &past, &mut hits);
+                assert_eq!(still, counted(c), "{start} + {len}");
+                answers[usize::from(still)] += 1;
+            }
+        }
+        assert!(answers[0] > 100 && answers[1] > 100, "{answers:?}");
     }
 
     #[test]
