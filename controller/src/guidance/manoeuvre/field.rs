@@ -94,12 +94,8 @@ impl Field {
     }
 
     /// Whether the rectangle at `pose` lies in seen space
-    /// ([`crate::perception::rectangle_seen`]).
-    pub fn seen_at(&self, pose: [f64; 3]) -> bool {
-        self.seen_turned(pose, pose[2].sin_cos())
-    }
-
-    /// [`Field::seen_at`], the sine and cosine of the heading given (`turn`).
+    /// ([`crate::perception::rectangle_seen`]), the sine and cosine of its heading given
+    /// (`turn`).
     pub fn seen_turned(&self, [x, y, _]: [f64; 3], turn: (f64, f64)) -> bool {
         let Some(seen) = &self.seen else {
             return true;
