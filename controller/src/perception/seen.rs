@@ -8,9 +8,7 @@
 //! a long route costs memory only where the car has been.
 
 use super::{Beam, Pose2, Scan};
-use crate::grid::Grid;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use crate::grid::{CellMap, Grid};
 
 /// Side of a cell, metres.
 pub const CELL: f64 = 0.25;
@@ -34,34 +32,9 @@ const HIT_CAP: u8 = 12;
 /// A chunk's hit evidence, one byte a cell.
 type Evidence = [[u8; CHUNK as usize]; CHUNK as usize];
 
-/// A hash of chunk coordinates (FxHash's step, a multiply and a rotation per word):
-/// the default SipHash cost some 200 instructions a lookup, a ray looks up two or three
-/// chunks. Nothing iterates the maps in an order that matters ([`SeenSpace::hits_in`]
-/// sorts).
-#[derive(Clone, Copy, Debug, Default)]
-struct ChunkHasher(u64);
-
-impl Hasher for ChunkHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, word: u64) {
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-
-    fn write_i64(&mut self, word: i64) {
-        self.write_u64(word as u64);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
-
-type ChunkMap<V> = HashMap<(i64, i64), V, BuildHasherDefault<ChunkHasher>>;
+/// Chunks filed by their coordinates. Nothing iterates the maps in an order that
+/// matters ([`SeenSpace::hits_in`] sorts).
+type ChunkMap<V> = CellMap<V>;
 
 /// The seen space.
 #[derive(Clone, Debug, Default)]
@@ -78,6 +51,9 @@ pub struct SeenSpace {
 pub struct SeenWindow {
     grid: Grid,
     cells: Vec<bool>,
+    /// The cells not seen below and left of each grid corner (a summed-area table,
+    /// `nx + 1` corners a row): whether a box of cells is all seen is four lookups.
+    unseen: Vec<u32>,
 }
 
 fn cell(x: f64, y: f64) -> (i64, i64) {
@@ -282,14 +258,16 @@ impl SeenSpace {
                 cells.push(rows.is_some_and(|r| r[j.rem_euclid(CHUNK) as usize] & bit != 0));
             }
         }
+        let grid = Grid {
+            x0: i0 as f64 * CELL,
+            y0: j0 as f64 * CELL,
+            res: CELL,
+            nx,
+            ny,
+        };
         SeenWindow {
-            grid: Grid {
-                x0: i0 as f64 * CELL,
-                y0: j0 as f64 * CELL,
-                res: CELL,
-                nx,
-                ny,
-            },
+            unseen: unseen_sums(&grid, &cells),
+            grid,
             cells,
         }
     }
@@ -300,6 +278,65 @@ impl SeenWindow {
     pub fn seen(&self, x: f64, y: f64) -> bool {
         self.grid.index(x, y).is_some_and(|k| self.cells[k])
     }
+
+    /// [`rectangle_seen`] in this window, the same answer sooner: a rectangle, or a
+    /// side, whose cells are all seen ([`SeenWindow::around_seen`]) is not sampled
+    /// point by point.
+    /// The rectangle at (x, y) heading (sin, cos) `turn`; `extent` its front, rear
+    /// and half width.
+    pub fn rectangle_seen(&self, at: [f64; 2], turn: (f64, f64), extent: [f64; 3]) -> bool {
+        sides_seen(
+            |x, y| self.seen(x, y),
+            |points| self.around_seen(points),
+            at,
+            turn,
+            extent,
+        )
+    }
+
+    /// Whether every cell of the box round `points` grown by a cell lies in the window
+    /// and is seen: then so is every point within a rounding error of the box (a
+    /// sample along a side computed another way). False when unsure (a NaN).
+    fn around_seen(&self, points: &[[f64; 2]]) -> bool {
+        let g = &self.grid;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in points {
+            if p[0].is_nan() || p[1].is_nan() {
+                return false;
+            }
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        // The box's first and last corners in the table along one axis: one cell before
+        // the lowest point's and one past the highest's, within the window (where the
+        // offsets are at least a cell, truncation is their floor).
+        let span = |k: usize, origin: f64, n: usize| {
+            let (u0, u1) = ((lo[k] - origin) / g.res, (hi[k] - origin) / g.res);
+            let (i0, i1) = (u0 as u32 as usize, u1 as u32 as usize + 2);
+            (u0 >= 1.0 && i1 <= n).then(|| (i0 - 1, i1))
+        };
+        let (Some((i0, i1)), Some((j0, j1))) = (span(0, g.x0, g.nx), span(1, g.y0, g.ny)) else {
+            return false;
+        };
+        let at = |i: usize, j: usize| self.unseen[j * (g.nx + 1) + i];
+        at(i1, j1) + at(i0, j0) == at(i0, j1) + at(i1, j0)
+    }
+}
+
+/// The summed-area table of the cells not seen ([`SeenWindow::unseen`]).
+fn unseen_sums(grid: &Grid, cells: &[bool]) -> Vec<u32> {
+    let w = grid.nx + 1;
+    let mut sums = vec![0u32; w * (grid.ny + 1)];
+    for j in 0..grid.ny {
+        let mut row = 0;
+        for i in 0..grid.nx {
+            row += u32::from(!cells[j * grid.nx + i]);
+            sums[(j + 1) * w + i + 1] = sums[j * w + i + 1] + row;
+        }
+    }
+    sums
 }
 
 /// Whether the car's rectangle at `pose` (`front` ahead of it, `rear` behind,
@@ -310,19 +347,52 @@ impl SeenWindow {
 /// laser never saw between them.)
 pub fn rectangle_seen(
     seen: impl Fn(f64, f64) -> bool,
-    [x, y, theta]: [f64; 3],
+    pose: [f64; 3],
     front: f64,
     rear: f64,
     half_width: f64,
 ) -> bool {
-    let (c, s) = (theta.cos(), theta.sin());
-    let at = |u: f64, v: f64| seen(x + u * c - v * s, y + u * s + v * c);
+    let [x, y, theta] = pose;
+    let turn = (theta.sin(), theta.cos());
+    sides_seen(seen, |_| false, [x, y], turn, [front, rear, half_width])
+}
+
+/// [`rectangle_seen`] side by side: true at once where `known` (given the rectangle's
+/// corners, or a side's ends) knows them all seen, a side skipped where it knows that
+/// side seen; the rectangle at (x, y) heading (sin, cos) `turn`, its extent its front,
+/// rear and half width.
+fn sides_seen(
+    seen: impl Fn(f64, f64) -> bool,
+    known: impl Fn(&[[f64; 2]]) -> bool,
+    [x, y]: [f64; 2],
+    (s, c): (f64, f64),
+    [front, rear, half_width]: [f64; 3],
+) -> bool {
+    let point = |u: f64, v: f64| [x + u * c - v * s, y + u * s + v * c];
+    let corners = [
+        point(-rear, -half_width),
+        point(-rear, half_width),
+        point(front, -half_width),
+        point(front, half_width),
+    ];
+    if known(&corners) {
+        return true;
+    }
+    let at = |u: f64, v: f64| {
+        let [px, py] = point(u, v);
+        seen(px, py)
+    };
     let steps = |len: f64| ((len / (CELL / 2.0)).ceil() as usize).max(1);
     let (nu, nv) = (steps(front + rear), steps(2.0 * half_width));
     let along = |k: usize| -rear + (front + rear) * k as f64 / nu as f64;
     let across = |k: usize| -half_width + 2.0 * half_width * k as f64 / nv as f64;
-    (0..=nu).all(|k| at(along(k), -half_width) && at(along(k), half_width))
-        && (1..nv).all(|k| at(-rear, across(k)) && at(front, across(k)))
+    let long = |v: f64, ends: [[f64; 2]; 2]| known(&ends) || (0..=nu).all(|k| at(along(k), v));
+    let short = |u: f64, ends: [[f64; 2]; 2]| known(&ends) || (1..nv).all(|k| at(u, across(k)));
+    let [rear_right, rear_left, front_right, front_left] = corners;
+    long(-half_width, [rear_right, front_right])
+        && long(half_width, [rear_left, front_left])
+        && short(-rear, [rear_right, rear_left])
+        && short(front, [front_right, front_left])
 }
 
 #[cfg(test)]
@@ -444,5 +514,43 @@ mod tests {
             0.375,
             0.6
         ));
+    }
+
+    #[test]
+    fn the_window_answers_as_the_check_point_by_point() {
+        // Seen space with holes and edges: a marked patch, two unseen cells in it.
+        let mut seen = SeenSpace::default();
+        seen.mark_rectangle([4.0, 4.0, 0.3], 3.0, 3.0, 2.5);
+        let mut w = seen.window([0.0, 0.0], [8.0, 8.0]);
+        for hole in [[3.0, 3.0], [5.5, 4.5]] {
+            let k = w.grid.index(hole[0], hole[1]).unwrap();
+            w.cells[k] = false;
+        }
+        w.unseen = unseen_sums(&w.grid, &w.cells);
+        let (mut seen_poses, mut skipped) = (0, 0);
+        for i in 0..50 {
+            for j in 0..50 {
+                for h in 0..12 {
+                    let (x, y) = (f64::from(i) * 0.17, f64::from(j) * 0.17);
+                    let theta = f64::from(h) * 0.53;
+                    let turn = (theta.sin(), theta.cos());
+                    let fast = w.rectangle_seen([x, y], turn, [2.025, 0.375, 0.6]);
+                    let slow =
+                        rectangle_seen(|x, y| w.seen(x, y), [x, y, theta], 2.025, 0.375, 0.6);
+                    assert_eq!(fast, slow, "{x} {y} {theta}");
+                    seen_poses += usize::from(slow);
+                    skipped += usize::from(sides_seen(
+                        |_, _| false,
+                        |c| w.around_seen(c),
+                        [x, y],
+                        turn,
+                        [2.025, 0.375, 0.6],
+                    ));
+                }
+            }
+        }
+        // Both answers occur, and the table alone knows some seen poses seen.
+        assert!(seen_poses > 1000 && seen_poses < 30_000, "{seen_poses}");
+        assert!(skipped > 100, "{skipped} of {seen_poses}");
     }
 }

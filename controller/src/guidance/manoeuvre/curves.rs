@@ -5,7 +5,7 @@
 //! curvature, and verified: a word whose integrated end misses the goal is dropped, so
 //! a defect in a formula can cost a curve, never a wrong one.
 
-use super::path::{PathPoint, arc};
+use super::path::{PathPoint, turned_arc};
 use reeds_shepp_lib as rs;
 
 /// A curve's integrated end may miss the goal by this much and still be taken, metres
@@ -40,13 +40,17 @@ impl Curve {
     /// The curve from `from` sampled every `step` metres or less (the start excluded,
     /// every arc's end included).
     pub fn sample(&self, from: [f64; 3], step: f64) -> Vec<PathPoint> {
-        self.points(from, step).collect()
+        self.turned_points(from, step).map(|(p, _)| p).collect()
     }
 
-    /// The samples of [`Curve::sample`], one by one (a check that fails early samples
-    /// no further).
-    pub fn points(&self, from: [f64; 3], step: f64) -> impl Iterator<Item = PathPoint> + '_ {
-        let mut at = from;
+    /// The samples of [`Curve::sample`], one by one, each with its heading's sine and
+    /// cosine (what integrating the arcs computes, and the rectangle's checks need).
+    pub fn turned_points(
+        &self,
+        from: [f64; 3],
+        step: f64,
+    ) -> impl Iterator<Item = (PathPoint, (f64, f64))> + '_ {
+        let mut at = (from, from[2].sin_cos());
         self.arcs
             .iter()
             .flat_map(move |a| {
@@ -55,23 +59,27 @@ impl Curve {
                 (0..n).map(move |_| (d, a))
             })
             .map(move |(d, a)| {
-                at = arc(at, d, a.curvature);
-                PathPoint {
-                    x: at[0],
-                    y: at[1],
-                    theta: at[2],
+                at = turned_arc(at.0, at.1, d, a.curvature);
+                let [x, y, theta] = at.0;
+                let p = PathPoint {
+                    x,
+                    y,
+                    theta,
                     curvature: a.curvature,
                     forward: a.forward,
-                }
+                };
+                (p, at.1)
             })
     }
 
     /// Where the curve ends from `from`.
     fn end(&self, from: [f64; 3]) -> [f64; 3] {
-        self.arcs.iter().fold(from, |at, a| {
+        let start = (from, from[2].sin_cos());
+        let (end, _) = self.arcs.iter().fold(start, |(at, turn), a| {
             let d = if a.forward { a.length } else { -a.length };
-            arc(at, d, a.curvature)
-        })
+            turned_arc(at, turn, d, a.curvature)
+        });
+        end
     }
 }
 
@@ -85,28 +93,42 @@ pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> impl Iterator<Item =
         y: p[1] / radius,
         theta_degree: p[2].to_degrees(),
     };
-    let mut out: Vec<Curve> = rs::get_all_paths(pose(from), pose(to))
+    let words = rs::get_all_paths(pose(from), pose(to));
+    // Only the lengths at first: the heuristic takes the first curve that verifies, the
+    // analytic expansion a few, so each is made a curve when its turn comes (the
+    // shortest left, the earlier word of equal ones, as a stable sort would order them).
+    let mut left: Vec<(f64, usize)> = words
         .iter()
-        .map(|words| {
-            let arcs: Vec<Arc> = words
-                .iter()
-                .map(|w| Arc {
-                    length: w.param.abs() * radius,
-                    curvature: match w.steering {
-                        rs::Steering::Left => 1.0 / radius,
-                        rs::Steering::Right => -1.0 / radius,
-                        rs::Steering::Straight => 0.0,
-                    },
-                    forward: w.gear == rs::Gear::Forward,
-                })
-                .collect();
-            let length = arcs.iter().map(|a| a.length).sum();
-            Curve { arcs, length }
-        })
-        .filter(|c| c.length.is_finite())
+        .map(|w| w.iter().map(|e| arc_of(e, radius).length).sum())
+        .enumerate()
+        .filter(|&(_, length): &(usize, f64)| length.is_finite())
+        .map(|(k, length)| (length, k))
         .collect();
-    out.sort_by(|a, b| a.length.total_cmp(&b.length));
-    out.into_iter().filter(move |c| reaches(c.end(from), to))
+    std::iter::from_fn(move || {
+        let (next, _) = left
+            .iter()
+            .enumerate()
+            .min_by(|(_, a), (_, b)| a.0.total_cmp(&b.0))?;
+        let (length, k) = left.remove(next);
+        Some(Curve {
+            arcs: words[k].iter().map(|e| arc_of(e, radius)).collect(),
+            length,
+        })
+    })
+    .filter(move |c| reaches(c.end(from), to))
+}
+
+/// One of the crate's words as an arc for the turning radius `radius`.
+fn arc_of(w: &rs::PathElement, radius: f64) -> Arc {
+    Arc {
+        length: w.param.abs() * radius,
+        curvature: match w.steering {
+            rs::Steering::Left => 1.0 / radius,
+            rs::Steering::Right => -1.0 / radius,
+            rs::Steering::Straight => 0.0,
+        },
+        forward: w.gear == rs::Gear::Forward,
+    }
 }
 
 /// The shortest curve's length from `from` to `to`: the non-holonomic heuristic

@@ -7,8 +7,8 @@
 
 use super::super::footprint::Footprint;
 use super::path::PathPoint;
-use crate::grid::Grid;
-use crate::perception::{SeenWindow, rectangle_seen};
+use crate::grid::{CellMap, Grid};
+use crate::perception::SeenWindow;
 
 /// Distances are capped at this, metres (beyond it every pose is clear anyway).
 const CAP: f64 = 1.5;
@@ -33,7 +33,7 @@ pub struct Field {
     grid: Grid,
     dist: Vec<f32>,
     discs: Vec<Disc>,
-    buckets: std::collections::HashMap<(i32, i32), Vec<u32>>,
+    buckets: CellMap<Vec<u32>>,
     /// The largest disc's radius (how far from its bucket a disc reaches).
     max_r: f64,
     car: Footprint,
@@ -41,6 +41,10 @@ pub struct Field {
     cover: f64,
     /// Space seen free: the car backs only into it (None: everywhere).
     seen: Option<SeenWindow>,
+    /// The box (x and y lows, then highs) within which a pose has its rectangle's
+    /// corners in the window whatever its heading: the window less the farthest
+    /// corner's reach and a micrometre, far more than the corners' rounding.
+    sure_inside: [f64; 4],
 }
 
 impl Field {
@@ -49,15 +53,23 @@ impl Field {
     pub fn new(lo: [f64; 2], hi: [f64; 2], res: f64, discs: Vec<Disc>, car: Footprint) -> Field {
         let grid = Grid::covering(lo, hi, res);
         let half = (car.front + car.rear) / 2.0;
+        let reach = car.front.max(car.rear).hypot(car.half_width) + 1e-6;
+        let top = grid.hi();
         let mut field = Field {
             grid,
             dist: vec![CAP as f32; grid.len()],
             discs: Vec::new(),
-            buckets: std::collections::HashMap::new(),
+            buckets: CellMap::default(),
             max_r: 0.0,
             car,
             cover: (half / COVER as f64).hypot(car.half_width) + car.margin,
             seen: None,
+            sure_inside: [
+                grid.x0 + reach,
+                grid.y0 + reach,
+                top[0] - reach,
+                top[1] - reach,
+            ],
         };
         for d in discs {
             field.add(d);
@@ -73,22 +85,23 @@ impl Field {
     /// Whether the car may be at `p`: the rectangle clear and, reached backwards, in
     /// seen space.
     pub fn passable(&self, p: &PathPoint) -> bool {
-        self.clear(p.pose()) && (p.forward || self.seen_at(p.pose()))
+        self.passable_turned(p, p.theta.sin_cos())
     }
 
-    /// Whether the rectangle at `pose` lies in seen space ([`rectangle_seen`]).
-    pub fn seen_at(&self, [x, y, theta]: [f64; 3]) -> bool {
+    /// [`Field::passable`], the sine and cosine of the heading given (`turn`).
+    pub fn passable_turned(&self, p: &PathPoint, turn: (f64, f64)) -> bool {
+        self.clear_turned(p.pose(), turn) && (p.forward || self.seen_turned(p.pose(), turn))
+    }
+
+    /// Whether the rectangle at `pose` lies in seen space
+    /// ([`crate::perception::rectangle_seen`]), the sine and cosine of its heading given
+    /// (`turn`).
+    pub fn seen_turned(&self, [x, y, _]: [f64; 3], turn: (f64, f64)) -> bool {
         let Some(seen) = &self.seen else {
             return true;
         };
         let f = &self.car;
-        rectangle_seen(
-            |x, y| seen.seen(x, y),
-            [x, y, theta],
-            f.front,
-            f.rear,
-            f.half_width,
-        )
+        seen.rectangle_seen([x, y], turn, [f.front, f.rear, f.half_width])
     }
 
     fn add(&mut self, d: Disc) {
@@ -143,9 +156,13 @@ impl Field {
     /// Whether the car's rectangle (grown by its margin) at `pose` clears every
     /// obstacle and lies in the window.
     pub fn clear(&self, pose: [f64; 3]) -> bool {
-        let [x, y, theta] = pose;
+        self.clear_turned(pose, pose[2].sin_cos())
+    }
+
+    /// [`Field::clear`], the sine and cosine of the heading given (`turn`).
+    pub fn clear_turned(&self, [x, y, _]: [f64; 3], turn: (f64, f64)) -> bool {
         let f = &self.car;
-        let (s, c) = theta.sin_cos();
+        let (s, c) = turn;
         let half = (f.front + f.rear) / 2.0;
         let mid = (f.front - f.rear) / 2.0;
         let slack = self.slack();
@@ -178,6 +195,10 @@ impl Field {
     /// Whether the rectangle's corners lie in the window (beyond it nothing is known),
     /// the car at (x, y) heading (cos `c`, sin `s`).
     fn corners_inside(&self, x: f64, y: f64, c: f64, s: f64) -> bool {
+        let [x0, y0, x1, y1] = self.sure_inside;
+        if x >= x0 && y >= y0 && x <= x1 && y <= y1 {
+            return true;
+        }
         let f = &self.car;
         [
             (f.front, f.half_width),
@@ -214,8 +235,8 @@ impl Field {
     }
 }
 
-fn bucket(x: f64, y: f64) -> (i32, i32) {
-    ((x / BUCKET).floor() as i32, (y / BUCKET).floor() as i32)
+fn bucket(x: f64, y: f64) -> (i64, i64) {
+    ((x / BUCKET).floor() as i64, (y / BUCKET).floor() as i64)
 }
 
 #[cfg(test)]
@@ -264,6 +285,32 @@ mod tests {
             }
         }
         assert_eq!(checked, 28_800);
+    }
+
+    #[test]
+    fn the_corners_are_in_the_window_where_the_sure_box_says() {
+        let field = Field::new([0.0, 0.0], [10.0, 10.0], 0.1, Vec::new(), CAR);
+        let corner_in = |x: f64, y: f64, c: f64, s: f64, u: f64, v: f64| {
+            field.inside(x + u * c - v * s, y + u * s + v * c)
+        };
+        let mut sure = 0;
+        for i in 0..400 {
+            for h in 0..36 {
+                // Across the window's diagonal and out beyond its corners.
+                let x = -0.5 + f64::from(i) * 0.0275;
+                let y = 10.5 - x * 0.9;
+                let (s, c) = (f64::from(h) * 0.17).sin_cos();
+                let every = [CAR.front, -CAR.rear].into_iter().all(|u| {
+                    [CAR.half_width, -CAR.half_width]
+                        .into_iter()
+                        .all(|v| corner_in(x, y, c, s, u, v))
+                });
+                assert_eq!(field.corners_inside(x, y, c, s), every, "{x} {y} {h}");
+                let [x0, y0, x1, y1] = field.sure_inside;
+                sure += usize::from(x >= x0 && y >= y0 && x <= x1 && y <= y1);
+            }
+        }
+        assert!(sure > 1000, "{sure}");
     }
 
     #[test]

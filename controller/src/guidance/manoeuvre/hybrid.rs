@@ -14,7 +14,7 @@
 
 use super::curves;
 use super::field::Field;
-use super::path::{Manoeuvre, PathPoint, arc};
+use super::path::{Manoeuvre, PathPoint, arc, turned_arc};
 use crate::grid::Grid;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -115,6 +115,11 @@ const RS_HEURISTIC_RADII: f64 = 4.0;
 /// many curves each time (shortest first).
 const ANALYTIC_RANGE: f64 = 25.0;
 const ANALYTIC_CURVES: usize = 6;
+/// An analytic expansion's samples are checked this many apart first (0.8 m).
+const STRIDE: usize = 8;
+
+/// A successor: its pose, direction, curvature and the step's cost.
+type Step = ([f64; 3], bool, f64, f64);
 
 #[derive(Clone, Copy, Debug)]
 struct Node {
@@ -160,6 +165,8 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     // The partial manoeuvre's end: the generated node at least `PARTIAL_PROGRESS`
     // nearer the goal (by the holonomic way) of the least `partial_score`.
     let mut partial: Option<(f64, usize)> = None;
+    // The successors of the node being expanded, the buffer kept from one to the next.
+    let mut steps = Vec::with_capacity(2 * STEERS.len());
     while let Some(Reverse((_, _, id))) = open.pop() {
         let node = nodes[id];
         // A node since bettered in its cell is not expanded.
@@ -186,7 +193,8 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
                 complete: true,
             });
         }
-        for (pose, forward, curvature, step_cost) in successors(field, &node, s) {
+        successors(field, &node, s, &mut steps);
+        for &(pose, forward, curvature, step_cost) in &steps {
             let g = node.g + step_cost;
             let Some(slot) = best.slot(pose) else {
                 continue;
@@ -288,23 +296,21 @@ fn heuristic(holo: &Holonomic, pose: [f64; 3], goal: &Goal, s: &Settings) -> f64
     h
 }
 
-/// The successors of `node`: one step on each steering, forward and backward, whose
-/// every sampled pose the car's rectangle clears; with the cost of the step.
-fn successors(field: &Field, node: &Node, s: &Settings) -> Vec<([f64; 3], bool, f64, f64)> {
+/// The successors of `node` into `out` (emptied first): one step on each steering,
+/// forward and backward, whose every sampled pose the car's rectangle clears; with the
+/// cost of the step.
+fn successors(field: &Field, node: &Node, s: &Settings, out: &mut Vec<Step>) {
     let n = (s.step / SAMPLE).ceil().max(1.0) as usize;
     let root = node.parent == usize::MAX;
-    let mut out = Vec::with_capacity(2 * STEERS.len());
+    let turn = node.pose[2].sin_cos();
+    out.clear();
     for forward in [true, false] {
         for fraction in STEERS {
             let curvature = fraction / s.turn_radius;
             let d = if forward { s.step } else { -s.step };
-            let clear = (1..=n).all(|k| {
-                let p = arc(node.pose, d * k as f64 / n as f64, curvature);
-                field.clear(p) && (forward || field.seen_at(p))
-            });
-            if !clear {
+            let Some(end) = step_clear(field, node.pose, turn, d, forward, curvature, n) else {
                 continue;
-            }
+            };
             let mut cost = s.step * if forward { 1.0 } else { s.reverse_weight };
             cost += s.steer_weight * fraction.abs() * s.step;
             if !root {
@@ -313,10 +319,35 @@ fn successors(field: &Field, node: &Node, s: &Settings) -> Vec<([f64; 3], bool, 
                     cost += s.cusp_cost;
                 }
             }
-            out.push((arc(node.pose, d, curvature), forward, curvature, cost));
+            out.push((end, forward, curvature, cost));
         }
     }
-    out
+}
+
+/// Where a step of `d` metres on `curvature` from `from` (its heading's sine and
+/// cosine `turn`) ends, if the rectangle clears its `n` samples (and, not `forward`,
+/// they lie in seen space); the last sample is the end when it is `d` along.
+fn step_clear(
+    field: &Field,
+    from: [f64; 3],
+    turn: (f64, f64),
+    d: f64,
+    forward: bool,
+    curvature: f64,
+    n: usize,
+) -> Option<[f64; 3]> {
+    let mut end = None;
+    for k in 1..=n {
+        let along = d * k as f64 / n as f64;
+        let (p, at) = turned_arc(from, turn, along, curvature);
+        if !(field.clear_turned(p, at) && (forward || field.seen_turned(p, at))) {
+            return None;
+        }
+        if along == d {
+            end = Some(p);
+        }
+    }
+    Some(end.unwrap_or_else(|| arc(from, d, curvature)))
 }
 
 /// An analytic expansion from `node`: the shortest Reeds-Shepp curves to the goal, the
@@ -334,10 +365,28 @@ fn analytic(
     if dist > ANALYTIC_RANGE || !expansions.is_multiple_of(every) {
         return None;
     }
+    let mut samples = Vec::new();
     curves::curves(node.pose, goal.pose, s.turn_radius)
         .take(ANALYTIC_CURVES)
-        .find(|c| c.points(node.pose, SAMPLE).all(|p| field.passable(&p)))
-        .map(|c| c.sample(node.pose, SAMPLE))
+        .find(|c| {
+            samples.clear();
+            samples.extend(c.turned_points(node.pose, SAMPLE));
+            passable_all(field, &samples)
+        })
+        .map(|_| samples.into_iter().map(|(p, _)| p).collect())
+}
+
+/// Whether the car may be at each of `samples` (with its heading's sine and cosine):
+/// every [`STRIDE`]th first, then the rest. A curve the rectangle does not clear
+/// mostly meets its obstacle over a stretch of samples, wherever along it, and the
+/// answer does not depend on the order.
+fn passable_all(field: &Field, samples: &[(PathPoint, (f64, f64))]) -> bool {
+    let passable = |(p, turn): &(PathPoint, (f64, f64))| field.passable_turned(p, *turn);
+    samples.iter().step_by(STRIDE).all(passable)
+        && samples
+            .iter()
+            .enumerate()
+            .all(|(k, sample)| k % STRIDE == 0 || passable(sample))
 }
 
 /// The manoeuvre from the start to node `id` (each node one step of `step` metres from

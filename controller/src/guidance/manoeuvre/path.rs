@@ -26,16 +26,31 @@ impl PathPoint {
 /// The pose after driving `d` metres (negative: backwards) from `at` on the steering
 /// curvature `curvature`.
 pub fn arc(at: [f64; 3], d: f64, curvature: f64) -> [f64; 3] {
+    turned_arc(at, at[2].sin_cos(), d, curvature).0
+}
+
+/// [`arc`] from `at`, whose heading's sine and cosine are `turn` (the search takes
+/// many arcs from one pose), with the sine and cosine of the heading it ends at (the
+/// rectangle's check there needs them): the same values, computed once.
+pub fn turned_arc(
+    at: [f64; 3],
+    turn: (f64, f64),
+    d: f64,
+    curvature: f64,
+) -> ([f64; 3], (f64, f64)) {
     let [x, y, theta] = at;
+    let (sin, cos) = turn;
     if curvature.abs() < 1e-9 {
-        return [x + d * theta.cos(), y + d * theta.sin(), theta];
+        return ([x + d * cos, y + d * sin, theta], turn);
     }
     let t = theta + curvature * d;
-    [
-        x + (t.sin() - theta.sin()) / curvature,
-        y + (theta.cos() - t.cos()) / curvature,
+    let end = t.sin_cos();
+    let pose = [
+        x + (end.0 - sin) / curvature,
+        y + (cos - end.1) / curvature,
         t,
-    ]
+    ];
+    (pose, end)
 }
 
 /// A planned manoeuvre: from the car's pose (not included) to the goal.
@@ -179,6 +194,19 @@ mod tests {
         assert_eq!(m.segments(), vec![0..2, 2..4, 4..5]);
         assert_eq!(m.cusps(), 2);
         assert!((m.length([0.0, 0.0, 0.0]) - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_turned_arc_is_the_arc_and_its_end_heading_turned() {
+        let from = [1.0, -2.0, 0.7];
+        for (d, curvature) in [(0.4, 0.0), (-0.3, 0.38), (0.1, -0.19), (2.0, 1e-10)] {
+            let (end, (sin, cos)) = turned_arc(from, from[2].sin_cos(), d, curvature);
+            assert_eq!(end, arc(from, d, curvature));
+            assert_eq!((sin.to_bits(), cos.to_bits()), {
+                let (s, c) = end[2].sin_cos();
+                (s.to_bits(), c.to_bits())
+            });
+        }
     }
 
     #[test]
