@@ -2446,7 +2446,7 @@ mod tests {
         drive_east(&mut nav, 12);
         let outcome = solve(&nav.request(0.0, &pose, &seen));
         let (trajectory, record) = outcome.result.clone().expect("planned");
-        let p = trajectory.expect("a path").path().clone();
+        let p = *trajectory.expect("a path").path();
         let through = (0..=100)
             .map(|j| p.x_k() + p.span() * f64::from(j) / 100.0)
             .map(|x| outcome.frame.to_world(x, p.y(x)))

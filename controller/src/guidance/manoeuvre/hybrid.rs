@@ -174,24 +174,14 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
             continue;
         }
         if at_goal(node.pose, goal) {
-            let manoeuvre = finish(&nodes, id, Vec::new(), s.step);
-            return Ok(Found {
-                manoeuvre,
-                expansions,
-                complete: true,
-            });
+            return Ok(reached(&nodes, id, Vec::new(), s, expansions));
         }
         expansions += 1;
         if expansions > s.max_expansions {
             break;
         }
         if let Some(tail) = analytic(field, &node, goal, s, expansions) {
-            let manoeuvre = finish(&nodes, id, tail, s.step);
-            return Ok(Found {
-                manoeuvre,
-                expansions,
-                complete: true,
-            });
+            return Ok(reached(&nodes, id, tail, s, expansions));
         }
         successors(field, &node, s, &mut steps);
         for &(pose, forward, curvature, step_cost) in &steps {
@@ -234,6 +224,21 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         expansions,
         complete: false,
     })
+}
+
+/// The complete manoeuvre to node `id` then along `tail`, found after `expansions`.
+fn reached(
+    nodes: &[Node],
+    id: usize,
+    tail: Vec<PathPoint>,
+    s: &Settings,
+    expansions: usize,
+) -> Found {
+    Found {
+        manoeuvre: finish(nodes, id, tail, s.step),
+        expansions,
+        complete: true,
+    }
 }
 
 /// What a partial manoeuvre ending `way` from the goal (the holonomic way's length)
