@@ -89,10 +89,17 @@ impl Grid {
     /// The centre of the cell at `index`.
     pub fn centre(&self, index: usize) -> (f64, f64) {
         let (i, j) = (index % self.nx, index / self.nx);
-        (
-            self.x0 + (i as f64 + 0.5) * self.res,
-            self.y0 + (j as f64 + 0.5) * self.res,
-        )
+        (self.centre_x(i as i64), self.centre_y(j as i64))
+    }
+
+    /// The x of column `i`'s centres.
+    pub fn centre_x(&self, i: i64) -> f64 {
+        self.x0 + (i as f64 + 0.5) * self.res
+    }
+
+    /// The y of row `j`'s centres.
+    pub fn centre_y(&self, j: i64) -> f64 {
+        self.y0 + (j as f64 + 0.5) * self.res
     }
 
     /// The upper corner of the grid.

@@ -110,11 +110,10 @@ impl Field {
         let (i1, j1) = self.grid.cell(d.x + reach, d.y + reach);
         let g = self.grid;
         for j in j0.max(0)..=j1.min(g.ny as i64 - 1) {
-            // The cell's centre as `Grid::centre` computes it.
-            let dy = g.y0 + (j as f64 + 0.5) * g.res - d.y;
+            let dy = g.centre_y(j) - d.y;
             for i in i0.max(0)..=i1.min(g.nx as i64 - 1) {
                 let k = j as usize * g.nx + i as usize;
-                let dx = g.x0 + (i as f64 + 0.5) * g.res - d.x;
+                let dx = g.centre_x(i) - d.x;
                 if surely_not_nearer(dx, dy, d.r, self.dist[k]) {
                     continue;
                 }
