@@ -561,6 +561,12 @@ impl Controller {
         self.throttle.map_or(0.0, |(_, r)| r.wheel_speed)
     }
 
+    /// The brake command that adds `decel` m/s^2 with the brake's calibrated
+    /// deceleration, percent.
+    fn brake_pct(&self, decel: f64) -> f64 {
+        (decel / self.cfg.vehicle.brake_decel * 100.0).clamp(0.0, 100.0)
+    }
+
     /// Advance the mode machine and return the messages due at `now`.
     pub fn tick(&mut self, now: f64) -> Vec<GolfCarMessage> {
         self.advance_mode(now);
@@ -612,6 +618,7 @@ impl Controller {
                 steer,
                 speed,
                 room,
+                brake,
                 inputs,
             } => {
                 self.stop_reason = None;
@@ -626,14 +633,18 @@ impl Controller {
                     steer_cmd: wanted.to_radians(),
                     speed_cmd: speed,
                 });
-                let brake = stop_brake(self.speed(), room, &self.cfg);
+                let brake = stop_brake(self.speed(), room, &self.cfg).max(self.brake_pct(brake));
                 Demand::forward(
                     ControllerHeartbeatState::Auto,
                     (true, steer_deg),
                     (true, speed, brake),
                 )
             }
-            Guidance::Reverse { steer, speed } => {
+            Guidance::Reverse {
+                steer,
+                speed,
+                brake,
+            } => {
                 self.stop_reason = None;
                 let steer_deg = steer.to_degrees().clamp(-limit, limit);
                 Demand {
@@ -641,7 +652,7 @@ impl Controller {
                     ..Demand::forward(
                         ControllerHeartbeatState::Auto,
                         (true, steer_deg),
-                        (true, speed.clamp(0.0, top_speed), 0.0),
+                        (true, speed.clamp(0.0, top_speed), self.brake_pct(brake)),
                     )
                 }
             }

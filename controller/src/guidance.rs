@@ -131,14 +131,19 @@ pub enum Guidance {
         /// end: where the next replanning may find no way on), metres; infinite when
         /// no stop lies ahead.
         room: f64,
+        /// The deceleration the brake is asked to add, m/s^2 (a manoeuvre's cusp).
+        brake: f64,
         inputs: FollowInputs,
     },
-    /// Back out of a dead end in gear R ([`Reverse`]).
+    /// Back out of a dead end in gear R ([`Reverse`]), or a manoeuvre's backward
+    /// segment.
     Reverse {
         /// Road-wheel angle, radians.
         steer: f64,
         /// Speed backwards (a magnitude), m/s; 0 while braking at the end.
         speed: f64,
+        /// The deceleration the brake is asked to add, m/s^2.
+        brake: f64,
     },
     /// Stop with the steering held: no feasible path (or the planner failed).
     Stop { reason: String },
@@ -740,6 +745,7 @@ impl Navigator {
                     ..manoeuvre::Settings::default()
                 },
                 following: self.manoeuvre.as_ref().map(manoeuvre::Following::rest),
+                standing: pose.v.abs() < STANDING,
                 seen: None,
                 remembered: Vec::new(),
                 look_again: self
@@ -1152,7 +1158,9 @@ impl Navigator {
             forward_speed: forward.min(v.max_speed),
             reverse_speed: pc.reverse_speed.min(v.max_speed),
             decel: self.cfg.follower.decel,
-            coast: v.coast_m(pose.v.abs()),
+            dead_time: v.speed_dead_time_s,
+            time_constant: v.speed_time_constant_s,
+            brake_decel: v.brake_decel,
             wheelbase: v.wheelbase,
             max_steer: v.max_steer_deg.to_radians(),
         };
@@ -1166,12 +1174,14 @@ impl Navigator {
                 steer: c.steer,
                 speed: c.speed,
                 room: c.room,
+                brake: c.brake,
                 inputs: c.inputs,
             }
         } else {
             Guidance::Reverse {
                 steer: c.steer,
                 speed: c.speed,
+                brake: c.brake,
             }
         })
     }
@@ -1236,6 +1246,7 @@ impl Navigator {
             return Guidance::Reverse {
                 steer: r.steer,
                 speed,
+                brake: 0.0,
             };
         }
         if let Some(e) = &self.planner_error {
@@ -1253,6 +1264,7 @@ impl Navigator {
                 steer,
                 speed: self.cfg.planner.align_speed.min(self.cfg.vehicle.max_speed),
                 room: f64::INFINITY,
+                brake: 0.0,
                 inputs: FollowInputs {
                     e_y: 0.0,
                     e_theta: theta,
@@ -1360,6 +1372,7 @@ impl Navigator {
             steer,
             speed,
             room,
+            brake: 0.0,
             inputs,
         }
     }
@@ -2125,7 +2138,8 @@ mod tests {
                 nav.follow(&pose),
                 Guidance::Reverse {
                     steer: 0.0,
-                    speed: pc.reverse_speed
+                    speed: pc.reverse_speed,
+                    brake: 0.0,
                 }
             );
             // It brakes what the speed loop rolls on before the end of the way.

@@ -22,6 +22,7 @@ pub use hybrid::{Failure, Goal, Settings};
 pub use path::{Manoeuvre, PathPoint};
 
 use super::footprint::Footprint;
+use super::frame::wrap;
 use crate::perception::{SeenSpace, SeenWindow};
 use crate::planner::Obstacle;
 
@@ -40,6 +41,11 @@ const SWEEP_STEP: f64 = 0.3;
 /// (among its first this many samples), metres.
 const OFF_PATH: f64 = 0.3;
 const OFF_PATH_LOOK: usize = 20;
+/// ... or, standing, once its heading where it goes on is this far off the car's,
+/// radians: a segment ended off its planned end (a steering bias, a slow speed loop)
+/// leaves the next one beginning askew, tracked only at the lock on a tight arc; a
+/// search from the stand plans from the pose the car has.
+const STAND_HEADING: f64 = 0.2;
 /// Goals searched towards at most, the first the field clears (a goal clear of the
 /// obstacles in view may stand on a remembered return).
 const GOALS_SEARCHED: usize = 3;
@@ -73,6 +79,9 @@ pub struct ManoeuvreRequest {
     /// The manoeuvre being followed, from the pose it has reached: kept while the
     /// rectangle clears all of it.
     pub following: Option<Manoeuvre>,
+    /// The car stands (at a cusp, or before moving off): the manoeuvre followed must
+    /// go on in the car's heading (within [`STAND_HEADING`]).
+    pub standing: bool,
     /// The space seen free over the field's window: backward motion only into it (None:
     /// everywhere, as in tests of the search alone).
     pub seen: Option<SeenWindow>,
@@ -184,7 +193,8 @@ impl ManoeuvreRequest {
     /// Whether the manoeuvre being followed still clears every obstacle by the margin
     /// less [`HOLD_SLACK`] (perceived outlines shift from scan to scan; a manoeuvre
     /// dropped for a few centimetres would be searched anew, and the car would shuffle)
-    /// over the next [`HOLD_AHEAD`] samples, with the car within [`OFF_PATH`] of it.
+    /// over the next [`HOLD_AHEAD`] samples, with the car within [`OFF_PATH`] of it (and,
+    /// standing, within [`STAND_HEADING`] of its heading).
     pub fn following_holds(&self) -> bool {
         let margin = self.following_margin.unwrap_or(self.footprint.margin);
         let field = ManoeuvreRequest {
@@ -201,7 +211,11 @@ impl ManoeuvreRequest {
                 .iter()
                 .take(OFF_PATH_LOOK)
                 .any(|p| (p.x - self.start[0]).hypot(p.y - self.start[1]) <= OFF_PATH);
-            (on || m.points.is_empty())
+            let askew = self.standing
+                && m.points
+                    .first()
+                    .is_some_and(|p| wrap(p.theta - self.start[2]).abs() > STAND_HEADING);
+            (on && !askew || m.points.is_empty())
                 && m.points.iter().take(HOLD_AHEAD).all(|p| field.passable(p))
         })
     }

@@ -33,6 +33,9 @@ pub struct Command {
     pub speed: f64,
     /// Left of the segment to its end, metres.
     pub room: f64,
+    /// The deceleration the brake is asked to add to the speed loop's, m/s^2: what
+    /// stops the car at the segment's end (see [`brake_to_stop`]).
+    pub brake: f64,
     /// The law's inputs (the virtual car's on a backward segment).
     pub inputs: FollowInputs,
 }
@@ -65,14 +68,17 @@ pub struct Following {
 }
 
 /// How following is tuned: speeds (magnitudes), the deceleration to stop at a segment's
-/// end, the distance the speed loop rolls on after a stop command, the wheelbase and
-/// the steering lock (radians).
+/// end, the speed loop's dead time and time constant (seconds: the calibrated step
+/// response), the full brake's deceleration, the wheelbase and the steering lock
+/// (radians).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pace {
     pub forward_speed: f64,
     pub reverse_speed: f64,
     pub decel: f64,
-    pub coast: f64,
+    pub dead_time: f64,
+    pub time_constant: f64,
+    pub brake_decel: f64,
     pub wheelbase: f64,
     pub max_steer: f64,
 }
@@ -156,26 +162,7 @@ impl Following {
             let left = left_of(points, self.at - range.start, pose, forward);
             if left > END_SLACK {
                 let j = nearest(points, range.start, self.at, ahead) - range.start;
-                let inputs = inputs(&points[j], ahead, forward, pace.wheelbase);
-                let steer = if forward {
-                    law.steer(&inputs)
-                } else {
-                    -law.steer(&inputs)
-                };
-                let cruise = if forward {
-                    pace.forward_speed
-                } else {
-                    pace.reverse_speed
-                };
-                let stop = (2.0 * pace.decel * (left - pace.coast).max(0.0)).sqrt();
-                let gap = steer.clamp(-pace.max_steer, pace.max_steer) - ahead.phi;
-                return Some(Command {
-                    forward,
-                    steer,
-                    speed: cruise.min(stop) * steer_ready(gap),
-                    room: left,
-                    inputs,
-                });
+                return Some(along_segment(&points[j], left, pose, ahead, law, pace));
             }
             // At the segment's end: stand, then the next.
             if pose.v.abs() >= super::super::STANDING {
@@ -185,6 +172,7 @@ impl Following {
                     steer: if forward { 1.0 } else { -1.0 } * inputs.phi_ref,
                     speed: 0.0,
                     room: 0.0,
+                    brake: pace.decel,
                     inputs,
                 });
             }
@@ -192,6 +180,82 @@ impl Following {
             self.at = range.end;
         }
     }
+}
+
+/// The command on a segment with `left` metres of it to go, steering towards sample
+/// `p` (the one nearest where the car will be, `ahead`).
+fn along_segment(
+    p: &PathPoint,
+    left: f64,
+    pose: &Pose,
+    ahead: &Pose,
+    law: &SteeringLaw,
+    pace: &Pace,
+) -> Command {
+    let forward = p.forward;
+    let inputs = inputs(p, ahead, forward, pace.wheelbase);
+    let steer = if forward {
+        law.steer(&inputs)
+    } else {
+        -law.steer(&inputs)
+    };
+    let cruise = if forward {
+        pace.forward_speed
+    } else {
+        pace.reverse_speed
+    };
+    let stand = super::super::STANDING;
+    // Still rolling the other way (a manoeuvre found while moving): stop it on the
+    // full brake, the nearer to where the search began.
+    let along = if forward { pose.v } else { -pose.v };
+    if along <= -stand {
+        return Command {
+            forward,
+            steer,
+            speed: 0.0,
+            room: left,
+            brake: pace.brake_decel,
+            inputs,
+        };
+    }
+    // Where the car is when a command given now acts.
+    let reach = (left - along.max(0.0) * pace.dead_time).max(0.0);
+    let stop = (2.0 * pace.decel * reach).sqrt();
+    let target = steer.clamp(-pace.max_steer, pace.max_steer);
+    // Standing, the wheels as they stand too: the prediction knows the steering's
+    // lag, not its rate limit.
+    let gap = if pose.v.abs() < stand {
+        (target - ahead.phi).abs().max((target - pose.phi).abs())
+    } else {
+        target - ahead.phi
+    };
+    let speed = cruise.min(stop) * steer_ready(gap);
+    Command {
+        forward,
+        steer,
+        speed,
+        room: left,
+        brake: brake_to_stop(along.max(0.0), speed, reach, pace),
+        inputs,
+    }
+}
+
+/// The brake helps stop at a segment's end once stopping there needs this share of the
+/// planned deceleration (before, the speed loop alone slows the car).
+const BRAKE_FROM: f64 = 0.5;
+
+/// The deceleration the brake must add (m/s^2) for a car at speed `v` commanded to
+/// `speed` to stop within `reach` metres: what stopping there needs beyond what the
+/// speed loop gives on its own ((v - speed) / its time constant). A slow speed loop
+/// (a heavy load, a soft throttle map) so stops at a cusp in about the time the
+/// planned deceleration takes, instead of rolling on for seconds at a crawl.
+fn brake_to_stop(v: f64, speed: f64, reach: f64, pace: &Pace) -> f64 {
+    let needed = v * v / (2.0 * reach.max(0.01));
+    if needed < BRAKE_FROM * pace.decel {
+        return 0.0;
+    }
+    let from_loop = (v - speed).max(0.0) / pace.time_constant.max(0.01);
+    (needed - from_loop).max(0.0)
 }
 
 /// The share of the pace allowed with the road wheels `gap` radians off the command:
@@ -250,7 +314,9 @@ mod tests {
         forward_speed: 1.0,
         reverse_speed: 0.5,
         decel: 1.0,
-        coast: 0.0,
+        dead_time: 0.0,
+        time_constant: 0.3,
+        brake_decel: 4.0,
         wheelbase: 1.65,
         max_steer: 0.61,
     };
@@ -264,23 +330,40 @@ mod tests {
     /// As [`drive`], the road wheels starting at `phi` and turning at most `rate`
     /// radians per second.
     fn drive_steering(m: Manoeuvre, limit: usize, phi: f64, rate: f64) -> (Following, Vec<Pose>) {
-        let mut f = Following::new(m, true);
-        let mut pose = Pose {
+        let start = Pose {
             x: 0.0,
             y: 0.0,
             theta: 0.0,
             v: 0.0,
             phi,
         };
+        drive_with(m, limit, start, rate, &PACE, true)
+    }
+
+    /// As [`drive`] from `start` with `pace` (its time constant the speed loop's too),
+    /// the brake applied as asked if `brakes`.
+    fn drive_with(
+        m: Manoeuvre,
+        limit: usize,
+        start: Pose,
+        rate: f64,
+        pace: &Pace,
+        brakes: bool,
+    ) -> (Following, Vec<Pose>) {
+        let mut f = Following::new(m, true);
+        let mut pose = start;
         let mut poses = Vec::new();
         let dt = 0.01;
         for _ in 0..limit {
-            let Some(c) = f.command(&pose, &pose, &LAW, &PACE) else {
+            let Some(c) = f.command(&pose, &pose, &LAW, pace) else {
                 break;
             };
             let target = if c.forward { c.speed } else { -c.speed };
             // First-order speed, instant steering within the lock.
-            pose.v += (target - pose.v) * (dt / 0.3);
+            pose.v += (target - pose.v) * (dt / pace.time_constant);
+            if brakes {
+                pose.v -= (c.brake * dt).min(pose.v.abs()) * pose.v.signum();
+            }
             if c.speed == 0.0 && pose.v.abs() < 0.02 {
                 pose.v = 0.0;
             }
@@ -337,6 +420,68 @@ mod tests {
             .collect();
         assert_eq!(cusps.len(), 2, "{cusps:?}");
         assert!(cusps.iter().all(|v| *v < 0.06), "{cusps:?}");
+    }
+
+    #[test]
+    fn a_slow_speed_loop_is_helped_to_a_stand_at_each_cusp_by_the_brake() {
+        // A speed loop of 1.5 s (a heavy load) alone creeps into each cusp for seconds.
+        let m = sampled([0.0; 3], &[(3.0, 0.4), (-2.5, -0.4), (3.0, 0.4)]);
+        let end = m.points[m.points.len() - 1];
+        let slow = Pace {
+            time_constant: 1.5,
+            dead_time: 0.0,
+            ..PACE
+        };
+        let start = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let (f, braked) = drive_with(m.clone(), 20_000, start, f64::INFINITY, &slow, true);
+        let (g, coasted) = drive_with(m, 20_000, start, f64::INFINITY, &slow, false);
+        assert!(f.finished() && g.finished(), "not finished");
+        let last = braked[braked.len() - 1];
+        assert!(
+            (last.x - end.x).hypot(last.y - end.y) < 0.3,
+            "{last:?} vs {end:?}"
+        );
+        // Two cusps and the end, each reached a second or more sooner.
+        assert!(
+            braked.len() + 300 < coasted.len(),
+            "{} steps braked, {} coasting",
+            braked.len(),
+            coasted.len()
+        );
+    }
+
+    #[test]
+    fn a_car_still_rolling_against_the_first_segment_is_stopped_on_the_full_brake() {
+        // Found while the car rolls forward at 0.8 m/s: the manoeuvre begins backwards.
+        let m = sampled([0.0; 3], &[(-2.0, 0.0), (3.0, 0.4)]);
+        let rolling = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.8,
+            phi: 0.0,
+        };
+        let mut f = Following::new(m.clone(), true);
+        let c = f
+            .command(&rolling, &rolling, &LAW, &PACE)
+            .expect("a command");
+        assert!(!c.forward && c.speed == 0.0, "{c:?}");
+        assert_eq!(c.brake, PACE.brake_decel);
+        let (f, poses) = drive_with(m, 20_000, rolling, f64::INFINITY, &PACE, true);
+        assert!(f.finished(), "not finished");
+        // 0.8 m/s on the full 4 m/s^2 and the loop: stopped within 0.08 m.
+        let furthest = poses
+            .iter()
+            .take_while(|p| p.v >= 0.0)
+            .map(|p| p.x)
+            .fold(f64::MIN, f64::max);
+        assert!(furthest < 0.08, "rolled on to {furthest:.3} m");
     }
 
     #[test]

@@ -54,6 +54,7 @@ fn request(start: [f64; 3], goal: [f64; 3], obstacles: Vec<Obstacle>) -> Manoeuv
         remembered: Vec::new(),
         look_again: false,
         following_margin: None,
+        standing: false,
         escape_margin: 0.05,
     }
 }
@@ -250,6 +251,32 @@ fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
     assert!(following(8.5));
     assert!(!following(4.0));
     assert!(following(14.0));
+}
+
+#[test]
+fn a_manoeuvre_going_on_askew_of_the_standing_car_is_searched_anew() {
+    // The car stands 0.3 rad off the heading its next segment begins with (the last
+    // one ended askew): it holds while the car rolls on, not once it stands.
+    let straight = Manoeuvre {
+        points: (1..=80)
+            .map(|k| PathPoint {
+                x: f64::from(k) * 0.1,
+                y: 0.0,
+                theta: 0.0,
+                curvature: 0.0,
+                forward: true,
+            })
+            .collect(),
+    };
+    let holds = |heading: f64, standing: bool| {
+        let mut req = request([0.0, 0.0, heading], [8.0, 0.0, 0.0], Vec::new());
+        req.following = Some(straight.clone());
+        req.standing = standing;
+        req.following_holds()
+    };
+    assert!(holds(0.3, false));
+    assert!(!holds(0.3, true));
+    assert!(holds(0.1, true));
 }
 
 /// The car hemmed in at a margin of 0.25 m by four posts 0.2 m clear of its corners,
