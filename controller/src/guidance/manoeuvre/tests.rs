@@ -224,11 +224,9 @@ fn a_partial_manoeuvre_does_not_shuffle_for_the_last_few_decimetres() {
     assert!(m.points.iter().all(|p| p.forward));
 }
 
-#[test]
-fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
-    // Following a straight 8 m manoeuvre from its start: a post on it 6 m on (seen from
-    // afar, perhaps a few centimetres too big) does not drop it yet; 2 m on, it does.
-    let straight = Manoeuvre {
+/// A straight 8 m forward manoeuvre along x from the origin, sampled every 0.1 m.
+fn straight_8m() -> Manoeuvre {
+    Manoeuvre {
         points: (1..=80)
             .map(|k| PathPoint {
                 x: f64::from(k) * 0.1,
@@ -238,7 +236,14 @@ fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
                 forward: true,
             })
             .collect(),
-    };
+    }
+}
+
+#[test]
+fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
+    // Following a straight 8 m manoeuvre from its start: a post on it 6 m on (seen from
+    // afar, perhaps a few centimetres too big) does not drop it yet; 2 m on, it does.
+    let straight = straight_8m();
     let following = |post_x: f64| {
         let mut req = request(
             [0.0, 0.0, 0.0],
@@ -257,17 +262,7 @@ fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
 fn a_manoeuvre_going_on_askew_of_the_standing_car_is_searched_anew() {
     // The car stands 0.3 rad off the heading its next segment begins with (the last
     // one ended askew): it holds while the car rolls on, not once it stands.
-    let straight = Manoeuvre {
-        points: (1..=80)
-            .map(|k| PathPoint {
-                x: f64::from(k) * 0.1,
-                y: 0.0,
-                theta: 0.0,
-                curvature: 0.0,
-                forward: true,
-            })
-            .collect(),
-    };
+    let straight = straight_8m();
     let holds = |heading: f64, standing: bool| {
         let mut req = request([0.0, 0.0, heading], [8.0, 0.0, 0.0], Vec::new());
         req.following = Some(straight.clone());
