@@ -2,37 +2,10 @@
 //! manoeuvre planner's distance field and holonomic heuristic and the seen space's
 //! window are laid out on one.
 
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
-
-/// A hash of cell coordinates (FxHash's step, a multiply and a rotation per word): the
-/// default SipHash cost some 200 instructions a lookup, and its keys, drawn anew in
-/// each process, buy nothing here (no map's order of iteration matters).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct CellHasher(u64);
-
-impl Hasher for CellHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, word: u64) {
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-
-    fn write_i64(&mut self, word: i64) {
-        self.write_u64(word as u64);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
-
-/// A map keyed by cells (column, row) of some grid, hashed by [`CellHasher`].
-pub type CellMap<V> = HashMap<(i64, i64), V, BuildHasherDefault<CellHasher>>;
+/// A map keyed by cells (column, row) of some grid, hashed with FxHash: the default
+/// SipHash cost some 200 instructions a lookup, and its keys, drawn anew in each
+/// process, buy nothing here (no map's order of iteration matters).
+pub type CellMap<V> = rustc_hash::FxHashMap<(i64, i64), V>;
 
 /// Square cells of side `res` from (`x0`, `y0`), `nx` across and `ny` up.
 #[derive(Clone, Copy, Debug, PartialEq)]

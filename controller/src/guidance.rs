@@ -2417,8 +2417,7 @@ mod tests {
         let t = trajectory.expect("path");
         let p = t.path();
         let obstacles: Vec<planner::Obstacle> = gate.to_vec();
-        for j in 0..=100 {
-            let x = p.x_k() + p.span() * f64::from(j) / 100.0;
+        for x in p.stations(100) {
             let (wx, wy) = outcome.frame.to_world(x, p.y(x));
             let heading = outcome.frame.angle + p.heading(x);
             assert!(fp.clear_at(wx, wy, heading, &obstacles), "at x = {x}");
@@ -2461,8 +2460,8 @@ mod tests {
         let outcome = solve(&nav.request(0.0, &pose, &seen));
         let (trajectory, record) = outcome.result.clone().expect("planned");
         let p = *trajectory.expect("a path").path();
-        let through = (0..=100)
-            .map(|j| p.x_k() + p.span() * f64::from(j) / 100.0)
+        let through = p
+            .stations(100)
             .map(|x| outcome.frame.to_world(x, p.y(x)))
             .filter(|(wx, _)| (wx - 20.0).abs() < 0.2)
             .all(|(_, wy)| wy.abs() < 1.0);

@@ -127,8 +127,7 @@ impl Footprint {
             return false;
         }
         let n = (p.span().abs() / PATH_STEP).ceil().max(1.0) as usize;
-        (0..=n).all(|j| {
-            let x = p.x_k() + p.span() * j as f64 / n as f64;
+        p.stations(n).all(|x| {
             let at = (x - p.x_k()) / pace;
             let pose = (x, p.y(x), p.heading(x));
             moving
@@ -166,12 +165,7 @@ impl Footprint {
     pub fn path_clear(&self, t: &Trajectory, obstacles: &[Obstacle]) -> bool {
         let p = t.path();
         let n = (p.span().abs() / PATH_STEP).ceil().max(1.0) as usize;
-        let poses: Vec<[f64; 3]> = (0..=n)
-            .map(|j| {
-                let x = p.x_k() + p.span() * j as f64 / n as f64;
-                [x, p.y(x), p.heading(x)]
-            })
-            .collect();
+        let poses: Vec<[f64; 3]> = p.stations(n).map(|x| [x, p.y(x), p.heading(x)]).collect();
         // Only obstacles within reach of the rear axle's track can touch the car.
         let reach = self.front.max(self.rear).hypot(self.half_width) + self.margin;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);

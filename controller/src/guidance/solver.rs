@@ -573,11 +573,9 @@ fn give_way_or_pass(
             return None;
         };
         let p = t.path();
-        let n = 20;
         Some(
-            (0..=n)
-                .map(|j| {
-                    let x = p.x_k() + p.span() * f64::from(j) / f64::from(n);
+            p.stations(20)
+                .map(|x| {
                     let (wx, wy) = o.frame.to_world(x, p.y(x));
                     req.frame.to_path(wx, wy).1
                 })
@@ -775,8 +773,7 @@ fn in_sight(problem: &PlanProblem, t: &Trajectory, sight: f64) -> bool {
         .map(|o| o.x + o.radius)
         .fold(f64::NEG_INFINITY, f64::max)
         .min(p.x_f());
-    (0..=40)
-        .map(|j| p.x_k() + p.span() * f64::from(j) / 40.0)
+    p.stations(40)
         .take_while(|&x| x <= reach)
         .all(|x| (x - sx).hypot(p.y(x) - sy) <= sight)
 }
@@ -786,12 +783,7 @@ fn in_sight(problem: &PlanProblem, t: &Trajectory, sight: f64) -> bool {
 /// passage is narrow ahead of the car, not only beside it.
 fn narrow_ahead(problem: &PlanProblem, t: &Trajectory, reach: f64, r0: f64) -> bool {
     let p = t.path();
-    let points: Vec<(f64, f64)> = (0..=40)
-        .map(|j| {
-            let x = p.x_k() + p.span() * f64::from(j) / 40.0;
-            (x, p.y(x))
-        })
-        .collect();
+    let points: Vec<(f64, f64)> = p.stations(40).map(|x| (x, p.y(x))).collect();
     problem
         .obstacles
         .iter()
@@ -891,9 +883,8 @@ fn record(
             .map(|c| max_steer(&c.trajectory).to_degrees()),
         path: chosen.as_ref().map_or_else(Vec::new, |c| {
             let p = c.trajectory.path();
-            (0..=40)
-                .map(|j| {
-                    let x = p.x_k() + p.span() * f64::from(j) / 40.0;
+            p.stations(40)
+                .map(|x| {
                     let (wx, wy) = frame.to_world(x, p.y(x));
                     [wx, wy]
                 })

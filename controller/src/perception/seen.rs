@@ -32,18 +32,15 @@ const HIT_CAP: u8 = 12;
 /// A chunk's hit evidence, one byte a cell.
 type Evidence = [[u8; CHUNK as usize]; CHUNK as usize];
 
-/// Chunks filed by their coordinates. Nothing iterates the maps in an order that
-/// matters ([`SeenSpace::hits_in`] sorts).
-type ChunkMap<V> = CellMap<V>;
-
-/// The seen space.
+/// The seen space. Its chunks are filed by their coordinates; nothing iterates them in
+/// an order that matters ([`SeenSpace::hits_in`] sorts).
 #[derive(Clone, Debug, Default)]
 pub struct SeenSpace {
     chunks: Chunks,
     /// Evidence of returns per cell ([`HIT_GAIN`]): what the laser saw of the
     /// obstacles, remembered once they are out of its view (perception's tracks of
     /// them are dropped then).
-    hits: ChunkMap<Evidence>,
+    hits: CellMap<Evidence>,
 }
 
 /// SeenSpace space over a window of the world, copied out for one search.
@@ -98,7 +95,7 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64) -> impl Iterator<Item =
     })
 }
 
-type Chunks = ChunkMap<[u32; CHUNK as usize]>;
+type Chunks = CellMap<[u32; CHUNK as usize]>;
 
 /// log2 of [`CHUNK`]: a cell's chunk and its place in it by shift and mask, as
 /// `div_euclid` and `rem_euclid` by [`CHUNK`] give them (negative cells too).

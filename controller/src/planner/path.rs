@@ -213,6 +213,12 @@ impl PolynomialPath {
         self.x_f - self.x_k
     }
 
+    /// The `n + 1` stations from x_k to x_f, evenly spaced (`n` at least 1).
+    pub fn stations(&self, n: usize) -> impl Iterator<Item = f64> + use<> {
+        let (x_k, span) = (self.x_k(), self.span());
+        (0..=n).map(move |j| x_k + span * j as f64 / n as f64)
+    }
+
     /// The wheelbase l used for the curvature conditions.
     pub fn wheelbase(&self) -> f64 {
         self.wheelbase

@@ -15,9 +15,9 @@ use golf_car_can::{GolfCarMessage, SteeringReport, ThrottleCmd, ThrottleCmdGear,
 /// (dead time and lag) asked for an angle more than [`STEER_OFF_DEG`] away, and every
 /// command of the [`STEER_ASKS_S`] before that response time still does, it does not
 /// follow (a command off for a frame, a blip at the lock that the wheels with their
-/// lag do not show, is no finding). Replanning starts every path at the measured curvature, so a stuck
-/// steering is re-planned around every T_s: only a frozen angle against commands
-/// that keep asking for another shows it.
+/// lag do not show, is no finding). Replanning starts every path at the measured
+/// curvature, so a stuck steering is re-planned around every T_s: only a frozen angle
+/// against commands that keep asking for another shows it.
 const STEER_WINDOW_S: f64 = 1.0;
 const RESPONSE_S: f64 = 0.4;
 const STEER_FROZEN_DEG: f64 = 0.3;
@@ -216,12 +216,12 @@ impl ActuatorMonitor {
                 f
             }
         });
-        let standing_asks = self
+        let still_asked = self
             .steer_cmds
             .iter()
             .filter(|(t, _, _)| now - t >= RESPONSE_S && now - t < RESPONSE_S + STEER_ASKS_S)
             .all(|(_, _, a)| (a - r.angle).abs() > STEER_OFF_DEG);
-        if (farthest - r.angle).abs() > STEER_OFF_DEG && standing_asks {
+        if (farthest - r.angle).abs() > STEER_OFF_DEG && still_asked {
             self.found(
                 now,
                 format!(

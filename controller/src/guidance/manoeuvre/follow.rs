@@ -6,6 +6,7 @@
 
 use super::hybrid::SAMPLE;
 use super::path::{Manoeuvre, PathPoint};
+use crate::guidance::STANDING;
 use crate::guidance::follower::{FollowInputs, SteeringLaw};
 use crate::localisation::Pose;
 
@@ -165,7 +166,7 @@ impl Following {
                 return Some(along_segment(&points[j], left, pose, ahead, law, pace));
             }
             // At the segment's end: stand, then the next.
-            if pose.v.abs() >= super::super::STANDING {
+            if pose.v.abs() >= STANDING {
                 let inputs = inputs(&points[points.len() - 1], ahead, forward, pace.wheelbase);
                 return Some(Command {
                     forward,
@@ -204,11 +205,10 @@ fn along_segment(
     } else {
         pace.reverse_speed
     };
-    let stand = super::super::STANDING;
     // Still rolling the other way (a manoeuvre found while moving): stop it on the
     // full brake, the nearer to where the search began.
     let along = if forward { pose.v } else { -pose.v };
-    if along <= -stand {
+    if along <= -STANDING {
         return Command {
             forward,
             steer,
@@ -224,7 +224,7 @@ fn along_segment(
     let target = steer.clamp(-pace.max_steer, pace.max_steer);
     // Standing, the wheels as they stand too: the prediction knows the steering's
     // lag, not its rate limit.
-    let gap = if pose.v.abs() < stand {
+    let gap = if pose.v.abs() < STANDING {
         (target - ahead.phi).abs().max((target - pose.phi).abs())
     } else {
         target - ahead.phi
