@@ -260,7 +260,7 @@ fn a_manoeuvre_followed_is_held_while_only_its_far_part_is_blocked() {
 
 #[test]
 fn a_manoeuvre_going_on_askew_of_the_standing_car_is_searched_anew() {
-    // The car stands 0.3 rad off the heading its next segment begins with (the last
+    // The car stands 0.15 rad off the heading its next segment begins with (the last
     // one ended askew): it holds while the car rolls on, not once it stands.
     let straight = straight_8m();
     let holds = |heading: f64, standing: bool| {
@@ -269,9 +269,9 @@ fn a_manoeuvre_going_on_askew_of_the_standing_car_is_searched_anew() {
         req.standing = standing;
         req.following_holds()
     };
-    assert!(holds(0.3, false));
-    assert!(!holds(0.3, true));
-    assert!(holds(0.1, true));
+    assert!(holds(0.15, false));
+    assert!(!holds(0.15, true));
+    assert!(holds(0.05, true));
 }
 
 /// The car hemmed in at a margin of 0.25 m by four posts 0.2 m clear of its corners,
