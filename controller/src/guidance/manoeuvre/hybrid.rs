@@ -160,18 +160,32 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
     best.set(slot, 0);
     let mut open = BinaryHeap::new();
     let mut seq = 0u64;
-    open.push(Reverse((h0.to_bits(), seq, 0usize)));
+    open.push(Reverse((h0.to_bits(), seq, 0usize, false)));
     let mut expansions = 0;
     // The partial manoeuvre's end: the generated node at least `PARTIAL_PROGRESS`
     // nearer the goal (by the holonomic way) of the least `partial_score`.
     let mut partial: Option<(f64, usize)> = None;
     // The successors of the node being expanded, the buffer kept from one to the next.
     let mut steps = Vec::with_capacity(2 * STEERS.len());
-    while let Some(Reverse((_, _, id))) = open.pop() {
+    while let Some(Reverse((key, _, id, exact))) = open.pop() {
         let node = nodes[id];
         // A node since bettered in its cell is not expanded.
         if best.get(node.slot) != Some(id) {
             continue;
+        }
+        // Queued on the holonomic heuristic alone, a node near the goal is taken out
+        // only once its Reeds-Shepp one is known: queued again if that raises it.
+        if !exact {
+            let h = reeds_shepp(&holo, node.pose, goal, s);
+            if !h.is_finite() {
+                continue;
+            }
+            let f = node.g + h;
+            if f > f64::from_bits(key) {
+                seq += 1;
+                open.push(Reverse((f.to_bits(), seq, id, true)));
+                continue;
+            }
         }
         if at_goal(node.pose, goal) {
             return Ok(reached(&nodes, id, Vec::new(), s, expansions));
@@ -192,7 +206,7 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
             if best.get(slot).is_some_and(|b| nodes[b].g <= g) {
                 continue;
             }
-            let h = heuristic(&holo, pose, goal, s);
+            let h = holo.at(pose[0], pose[1]);
             if !h.is_finite() {
                 continue;
             }
@@ -205,14 +219,13 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
                 curvature,
             });
             let child = nodes.len() - 1;
-            let way = holo.at(pose[0], pose[1]);
-            let score = partial_score(way, g);
-            if way <= h0 - PARTIAL_PROGRESS && partial.is_none_or(|(best, _)| score < best) {
+            let score = partial_score(h, g);
+            if h <= h0 - PARTIAL_PROGRESS && partial.is_none_or(|(best, _)| score < best) {
                 partial = Some((score, child));
             }
             best.set(slot, child);
             seq += 1;
-            open.push(Reverse(((g + h).to_bits(), seq, child)));
+            open.push(Reverse(((g + h).to_bits(), seq, child, false)));
         }
     }
     let expansions = expansions.min(s.max_expansions);
@@ -317,7 +330,10 @@ impl Drop for Kept {
     }
 }
 
-fn heuristic(holo: &Holonomic, pose: [f64; 3], goal: &Goal, s: &Settings) -> f64 {
+/// The heuristic at `pose`: the holonomic one and, near the goal, the Reeds-Shepp one,
+/// the larger. Computed for the nodes taken out of the queue only (a few in ten of
+/// those queued): they are queued on the holonomic one, a lower bound of it.
+fn reeds_shepp(holo: &Holonomic, pose: [f64; 3], goal: &Goal, s: &Settings) -> f64 {
     let h = holo.at(pose[0], pose[1]);
     let near =
         (pose[0] - goal.pose[0]).hypot(pose[1] - goal.pose[1]) < RS_HEURISTIC_RADII * s.turn_radius;
