@@ -158,32 +158,27 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         curvature: 0.0,
     }];
     best.set(slot, 0);
-    let mut open = BinaryHeap::new();
-    let mut seq = 0u64;
-    open.push(Reverse((h0.to_bits(), seq, 0usize, false)));
+    let mut open = Open::default();
+    open.push(h0, 0, false);
     let mut expansions = 0;
-    // The partial manoeuvre's end: the generated node at least `PARTIAL_PROGRESS`
-    // nearer the goal (by the holonomic way) of the least `partial_score`.
+    // The partial manoeuvre's end: of least `partial_score`, `PARTIAL_PROGRESS` nearer.
     let mut partial: Option<(f64, usize)> = None;
     // The successors of the node being expanded, the buffer kept from one to the next.
     let mut steps = Vec::with_capacity(2 * STEERS.len());
-    while let Some(Reverse((key, _, id, exact))) = open.pop() {
+    while let Some((key, id, exact)) = open.pop() {
         let node = nodes[id];
         // A node since bettered in its cell is not expanded.
         if best.get(node.slot) != Some(id) {
             continue;
         }
-        // Queued on the holonomic heuristic alone, a node near the goal is taken out
-        // only once its Reeds-Shepp one is known: queued again if that raises it.
+        // Queued on the holonomic heuristic, again if the Reeds-Shepp one raises it.
         if !exact {
             let h = reeds_shepp(&holo, node.pose, goal, s);
             if !h.is_finite() {
                 continue;
             }
-            let f = node.g + h;
-            if f > f64::from_bits(key) {
-                seq += 1;
-                open.push(Reverse((f.to_bits(), seq, id, true)));
+            if node.g + h > key {
+                open.push(node.g + h, id, true);
                 continue;
             }
         }
@@ -200,12 +195,11 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         successors(field, &node, s, &mut steps);
         for &(pose, forward, curvature, step_cost) in &steps {
             let g = node.g + step_cost;
-            let Some(slot) = best.slot(pose) else {
+            // Into a cell of position and heading only if better than its node.
+            let better = |&k: &usize| best.get(k).is_none_or(|b| nodes[b].g > g);
+            let Some(slot) = best.slot(pose).filter(better) else {
                 continue;
             };
-            if best.get(slot).is_some_and(|b| nodes[b].g <= g) {
-                continue;
-            }
             let h = holo.at(pose[0], pose[1]);
             if !h.is_finite() {
                 continue;
@@ -224,8 +218,7 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
                 partial = Some((score, child));
             }
             best.set(slot, child);
-            seq += 1;
-            open.push(Reverse(((g + h).to_bits(), seq, child, false)));
+            open.push(g + h, child, false);
         }
     }
     let expansions = expansions.min(s.max_expansions);
@@ -237,6 +230,28 @@ pub fn search(field: &Field, start: [f64; 3], goal: &Goal, s: &Settings) -> Resu
         expansions,
         complete: false,
     })
+}
+
+/// The open set: node ids by key (g + h, h exact or a lower bound of it), the first
+/// queued first among equal keys.
+#[derive(Default)]
+struct Open {
+    heap: BinaryHeap<Reverse<(u64, u64, usize, bool)>>,
+    queued: u64,
+}
+
+impl Open {
+    fn push(&mut self, key: f64, id: usize, exact: bool) {
+        self.queued += 1;
+        self.heap
+            .push(Reverse((key.to_bits(), self.queued, id, exact)));
+    }
+
+    /// The node of least key: the key, the node, whether its heuristic is exact.
+    fn pop(&mut self) -> Option<(f64, usize, bool)> {
+        let Reverse((key, _, id, exact)) = self.heap.pop()?;
+        Some((f64::from_bits(key), id, exact))
+    }
 }
 
 /// The complete manoeuvre to node `id` then along `tail`, found after `expansions`.
