@@ -1,15 +1,16 @@
 #!/usr/bin/env python3
 """SIL cost benchmark (issue 37 item 8), run by hand, not in CI.
 
-    scripts/lab/sil_cost.py instructions [--suite] [--barn N] [--bin B] [--out DIR]
+    scripts/lab/sil_cost.py instructions [--suite] [--scenarios DIR] [--barn N] [--jobs N] [--bin B] [--out DIR]
     scripts/lab/sil_cost.py rtf [--rounds N] [--bin B] [--venv DIR] [--out DIR]
     scripts/lab/sil_cost.py all [the options of both]
 
 instructions: callgrind instructions per simulated second of
 `ugv-sim run --sil --no-record SCENARIO --results DIR` under
 `valgrind --tool=callgrind`: the paper scenario (sim/scenarios/paper.toml) always,
-every scenario of sim/scenarios/suite with --suite (71 runs, about 970 simulated
-seconds, under callgrind: estimated 2-4 hours on the shared 2-core machine), every N-th
+every scenario of sim/scenarios/suite with --suite (71 runs, about 2,000 simulated
+seconds; `--jobs 2` runs two callgrinds at a time), every scenario of a folder with
+--scenarios DIR (e.g. the routes of scripts/lab/gen_posts_route.py), every N-th
 BARN world of ../shared/benchmarks/barn/worlds with --barn N (--barn 50: 5 worlds,
 over 30 minutes under load, as a world the car struggles in runs to its 8 x OT limit
 under callgrind; --barn 1: all 250, a day). Simulated seconds are `time` in each run's
@@ -33,6 +34,7 @@ PyPI on the first run (rtf). Exits 1 with a message on a missing tool or bad inp
 """
 
 import argparse
+import concurrent.futures
 import json
 import os
 import pathlib
@@ -119,6 +121,11 @@ def instructions(args, binary, out):
         if not files:
             die(f"no scenarios in {SUITE}")
         groups.append(("suite", files))
+    for d in args.scenarios:
+        files = sorted(pathlib.Path(d).glob("*.toml"))
+        if not files:
+            die(f"no scenarios (*.toml) in {d}")
+        groups.append((d, files))
     if args.barn:
         worlds = pathlib.Path(args.barn_worlds)
         files = sorted(worlds.glob("*.toml"))
@@ -130,17 +137,24 @@ def instructions(args, binary, out):
     lines = ["| group | item | simulated s | instructions | per simulated second |",
              "|---|---|---|---|---|"]
     totals = []
+
+    def item(f):
+        print(f"callgrind: {f.name} ...", file=sys.stderr, flush=True)
+        ir, t = callgrind_item(binary, f, out)
+        # As it goes too, so a long run interrupted keeps what it measured.
+        print(f"  {f.stem}: {t:.2f} s simulated, {ir} instructions, {fmt_m(ir / t)} per simulated second",
+              file=sys.stderr, flush=True)
+        return ir, t
+
     for name, files in groups:
         sum_ir = sum_t = 0
-        for f in files:
-            print(f"callgrind: {f.name} ...", file=sys.stderr, flush=True)
-            ir, t = callgrind_item(binary, f, out)
+        # Instruction counts do not depend on the load: items run `--jobs` at a time.
+        with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            measured = list(pool.map(item, files))
+        for f, (ir, t) in zip(files, measured):
             sum_ir += ir
             sum_t += t
             lines.append(f"| {name} | {f.stem} | {t:.2f} | {fmt_m(ir)} | {fmt_m(ir / t)} |")
-            # As it goes too, so a long run interrupted keeps what it measured.
-            print(f"  {f.stem}: {t:.2f} s simulated, {ir} instructions, {fmt_m(ir / t)} per simulated second",
-                  file=sys.stderr, flush=True)
         totals.append(f"| {name} | **total, {len(files)} runs** | {sum_t:.2f} | {fmt_m(sum_ir)} | "
                       f"**{fmt_m(sum_ir / sum_t)}** |")
     print(f"load average after: {loadavg()}", file=sys.stderr)
@@ -226,8 +240,11 @@ def main():
     p.add_argument("--bin", default=str(ROOT / "target" / "release" / "ugv-sim"), help="ugv-sim binary")
     p.add_argument("--out", default=str(ROOT / "results" / "sil-cost"), help="results folder (default results/sil-cost)")
     p.add_argument("--suite", action="store_true", help="also every scenario of sim/scenarios/suite (slow)")
+    p.add_argument("--scenarios", action="append", default=[], metavar="DIR",
+                   help="also every scenario in DIR (a group of its own; may be given again)")
     p.add_argument("--barn", type=int, default=0, metavar="N", help="also every N-th BARN world (1: all 250)")
     p.add_argument("--barn-worlds", default=str(BARN), help=f"BARN worlds folder (default {BARN})")
+    p.add_argument("--jobs", type=int, default=1, help="callgrind runs at a time for instructions (default 1)")
     p.add_argument("--rounds", type=int, default=10, help="paired rounds for rtf (default 10)")
     p.add_argument("--venv", default=str(ROOT / "target" / "sil-cost" / "venv"), help="IR-SIM venv")
     p.add_argument("--nice", type=int, default=19, help="niceness of the timed runs (default 19)")
