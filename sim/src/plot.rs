@@ -124,19 +124,6 @@ fn obstacle_shapes(o: &Obstacle, t: f64) -> Vec<Vec<(f64, f64)>> {
     }
 }
 
-fn moving(o: &Obstacle) -> bool {
-    matches!(
-        o,
-        Obstacle::Circle {
-            motion: Some(_),
-            ..
-        } | Obstacle::Box {
-            motion: Some(_),
-            ..
-        }
-    )
-}
-
 /// The plotted area: everything, padded, with equal scales.
 fn bounds(fig: &Figure<'_>) -> (f64, f64, f64, f64) {
     let sc = fig.scenario;
@@ -296,7 +283,7 @@ where
                 first = false;
             }
         }
-        if moving(o) {
+        if o.moves() {
             for shape in obstacle_shapes(o, end_time) {
                 chart
                     .draw_series(std::iter::once(PathElement::new(

@@ -154,18 +154,7 @@ impl Recorder {
         };
         let w = Writer::create(out.dir, ctx, info)?.with_mounts(mounts);
         let obstacles = sc.obstacles.clone();
-        let moving = obstacles.iter().any(|o| {
-            matches!(
-                o,
-                Obstacle::Circle {
-                    motion: Some(_),
-                    ..
-                } | Obstacle::Box {
-                    motion: Some(_),
-                    ..
-                }
-            )
-        });
+        let moving = obstacles.iter().any(Obstacle::moves);
         Ok(Recorder {
             w,
             ch,

@@ -33,6 +33,9 @@ struct Body {
 pub struct World {
     physics: PhysicsWorld,
     bodies: Vec<Body>,
+    /// Which of `bodies` move: the ones [`World::set_time`] visits (a world of a
+    /// thousand posts and two carts moves two).
+    movers: Vec<usize>,
     /// The same shapes in f64 for the laser ([`ray`]), in the order of `bodies`.
     prims: Vec<Prim>,
     time: f64,
@@ -139,9 +142,14 @@ impl World {
                 prims: first..prims.len(),
             });
         }
+        let movers = (bodies.iter().enumerate())
+            .filter(|(_, b)| b.spec.moves())
+            .map(|(i, _)| i)
+            .collect();
         let mut world = World {
             physics,
             bodies,
+            movers,
             prims,
             time: 0.0,
         };
@@ -158,7 +166,7 @@ impl World {
     pub fn set_time(&mut self, t: f64) {
         self.time = t;
         let mut moved = false;
-        for b in &self.bodies {
+        for b in self.movers.iter().map(|&i| &self.bodies[i]) {
             let (x0, y0, heading, motion) = match &b.spec {
                 Obstacle::Circle { x, y, motion, .. } => (*x, *y, 0.0, motion),
                 Obstacle::Box {

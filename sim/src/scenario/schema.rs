@@ -96,6 +96,22 @@ pub enum Obstacle {
     },
 }
 
+impl Obstacle {
+    /// Whether it moves (a post or a box with a motion; walls stand).
+    pub fn moves(&self) -> bool {
+        matches!(
+            self,
+            Obstacle::Circle {
+                motion: Some(_),
+                ..
+            } | Obstacle::Box {
+                motion: Some(_),
+                ..
+            }
+        )
+    }
+}
+
 /// The golf car's geometry and limits.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

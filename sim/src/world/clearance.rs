@@ -15,7 +15,7 @@
 use rapier2d::prelude::ColliderHandle;
 
 use super::World;
-use crate::scenario::schema::{Obstacle, VehicleConfig};
+use crate::scenario::schema::VehicleConfig;
 use crate::vehicle::VehicleState;
 
 /// Metres of slack for rounding (rapier measures in f32, a few ulp at a kilometre).
@@ -62,12 +62,7 @@ impl Clearances {
             .iter()
             .enumerate()
             .flat_map(|(i, b)| {
-                let moving = match &b.spec {
-                    Obstacle::Circle { motion, .. } | Obstacle::Box { motion, .. } => {
-                        motion.is_some()
-                    }
-                    Obstacle::Wall { .. } => false,
-                };
+                let moving = b.spec.moves();
                 b.colliders.iter().map(move |&collider| Item {
                     obstacle: i,
                     collider,
@@ -223,6 +218,7 @@ impl Clearances {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
+    use crate::scenario::schema::Obstacle;
     use rand::{RngExt, SeedableRng, rngs::ChaCha8Rng};
 
     /// Every collider measured at every step, as before the schedule.
