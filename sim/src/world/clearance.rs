@@ -42,12 +42,38 @@ struct Sample {
     sweep: f64,
 }
 
+/// A static item's place in the queue of measurements: due from sweep `0`.
+#[derive(Clone, Copy, Debug)]
+struct Due(f64, usize);
+
+impl PartialEq for Due {
+    fn eq(&self, other: &Due) -> bool {
+        self.cmp(other).is_eq()
+    }
+}
+impl Eq for Due {}
+impl PartialOrd for Due {
+    fn partial_cmp(&self, other: &Due) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Due {
+    /// The soonest due first out of a max-heap.
+    fn cmp(&self, other: &Due) -> std::cmp::Ordering {
+        other.0.total_cmp(&self.0).then(other.1.cmp(&self.1))
+    }
+}
+
 /// Closest approach of the footprint to each obstacle so far.
 #[derive(Clone, Debug)]
 pub struct Clearances {
     /// Minima over the poses each collider's search has covered.
     min: Vec<f64>,
     items: Vec<Item>,
+    /// The moving items (measured every step) and the static ones by when they are
+    /// due: a step looks at those due, not at every collider of the world.
+    moving: Vec<usize>,
+    queue: std::collections::BinaryHeap<Due>,
     /// Every distinct pose since the start.
     poses: Vec<Sample>,
     cfg: VehicleConfig,
@@ -57,7 +83,7 @@ pub struct Clearances {
 impl Clearances {
     /// Every obstacle measured from the footprint at `state`.
     pub fn new(world: &World, cfg: &VehicleConfig, state: &VehicleState) -> Clearances {
-        let items = world
+        let items: Vec<Item> = world
             .bodies
             .iter()
             .enumerate()
@@ -76,6 +102,11 @@ impl Clearances {
         let (x, y) = state.footprint_center(cfg);
         let mut c = Clearances {
             min: vec![f64::INFINITY; world.bodies.len()],
+            moving: (items.iter().enumerate())
+                .filter(|(_, it)| it.moving)
+                .map(|(i, _)| i)
+                .collect(),
+            queue: std::collections::BinaryHeap::new(),
             items,
             poses: vec![Sample {
                 x,
@@ -88,6 +119,9 @@ impl Clearances {
         };
         for i in 0..c.items.len() {
             c.measure_now(world, i);
+            if !c.items[i].moving {
+                c.queue.push(Due(c.items[i].due, i));
+            }
         }
         c
     }
@@ -118,19 +152,35 @@ impl Clearances {
         self.advance(cx, cy, state.theta);
         let (now, sweep) = (self.poses.len() - 1, self.sweep());
         let mut touched: Option<usize> = None;
-        for i in 0..self.items.len() {
+        let mut touch = |d: f64, obstacle: usize| {
+            if d <= 0.0 {
+                touched = Some(touched.map_or(obstacle, |t| t.min(obstacle)));
+            }
+        };
+        for k in 0..self.moving.len() {
+            let i = self.moving[k];
+            touch(self.measure_now(world, i), self.items[i].obstacle);
+        }
+        // A static item not due cannot touch: measured at this pose, it is due unless
+        // more than the margin away.
+        let mut due = Vec::new();
+        while let Some(&Due(at, i)) = self.queue.peek() {
+            if at > sweep {
+                break;
+            }
+            self.queue.pop();
+            due.push(i);
+        }
+        for i in due {
             let it = self.items[i];
-            let d = if it.moving || (it.at < now && sweep >= it.due) {
-                self.measure_now(world, i)
-            } else if it.at == now {
-                // Measured at this very pose already.
+            // Measured at this very pose already, or not.
+            let d = if it.at == now {
                 it.d
             } else {
-                continue;
+                self.measure_now(world, i)
             };
-            if d <= 0.0 {
-                touched = Some(touched.map_or(it.obstacle, |t| t.min(it.obstacle)));
-            }
+            touch(d, it.obstacle);
+            self.queue.push(Due(self.items[i].due, i));
         }
         touched
     }
