@@ -17,7 +17,7 @@ mod clearance;
 pub mod ray;
 
 pub use clearance::Clearances;
-use ray::{Fan, Form, Hit, Prim, ScannerPose};
+use ray::{Bins, Fan, Form, Hit, Prim, ScannerPose};
 
 /// One obstacle of the scenario in the physics world.
 #[derive(Debug)]
@@ -38,6 +38,8 @@ pub struct World {
     movers: Vec<usize>,
     /// The same shapes in f64 for the laser ([`ray`]), in the order of `bodies`.
     prims: Vec<Prim>,
+    /// The laser's broad phase over `prims`.
+    bins: Bins,
     time: f64,
 }
 
@@ -146,11 +148,13 @@ impl World {
             .filter(|(_, b)| b.spec.moves())
             .map(|(i, _)| i)
             .collect();
+        let bins = Bins::new(&prims, |k| bodies[prims[k].obstacle].spec.moves());
         let mut world = World {
             physics,
             bodies,
             movers,
             prims,
+            bins,
             time: 0.0,
         };
         world.refresh();
@@ -254,7 +258,7 @@ impl World {
     /// Every beam of `fan` from the scanner pose `(x, y, heading)` up to `max_range`:
     /// `hits[i]` is beam `i`'s range and obstacle (`f64::INFINITY` for no return).
     pub fn scan(&self, pose: ScannerPose, fan: &Fan, max_range: f64, hits: &mut Vec<Hit>) {
-        ray::scan(&self.prims, fan, pose, max_range, hits);
+        ray::scan(&self.prims, &self.bins, fan, pose, max_range, hits);
     }
 }
 

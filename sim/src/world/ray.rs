@@ -174,9 +174,99 @@ pub struct ScannerPose {
     pub heading_rad: f64,
 }
 
-/// One scan from `pose` up to `range_max` against `prims`: `hits[i]` is beam `i`'s
-/// nearest hit (`hits` is resized to the fan).
-pub fn scan(prims: &[Prim], fan: &Fan, pose: ScannerPose, range_max: f64, hits: &mut Vec<Hit>) {
+/// Side of a cell of [`Bins`], metres.
+const BIN: f64 = 4.0;
+/// Worlds of up to this many shapes are scanned shape by shape, without [`Bins`].
+const BINNED_FROM: usize = 64;
+
+/// The shapes that stand binned on a grid of [`BIN`] metres by their bounding
+/// circles, so a scan visits those near the scanner only; the moving ones apart,
+/// always visited. Empty for a small world (every shape visited).
+#[derive(Clone, Debug, Default)]
+pub struct Bins {
+    origin: [f64; 2],
+    size: [usize; 2],
+    /// Cell `k`'s shapes are `shapes[start[k]..start[k + 1]]`.
+    start: Vec<usize>,
+    shapes: Vec<usize>,
+    moving: Vec<usize>,
+}
+
+impl Bins {
+    /// The bins of `prims`, `moves` telling which move.
+    pub fn new(prims: &[Prim], moves: impl Fn(usize) -> bool) -> Bins {
+        if prims.len() <= BINNED_FROM {
+            return Bins::default();
+        }
+        let fixed: Vec<usize> = (0..prims.len()).filter(|&i| !moves(i)).collect();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in fixed.iter().map(|&i| &prims[i]) {
+            lo = [lo[0].min(p.x - p.bound), lo[1].min(p.y - p.bound)];
+            hi = [hi[0].max(p.x + p.bound), hi[1].max(p.y + p.bound)];
+        }
+        let mut bins = Bins {
+            origin: lo,
+            size: [0, 1].map(|k| ((hi[k] - lo[k]) / BIN).floor().max(0.0) as usize + 1),
+            moving: (0..prims.len()).filter(|&i| moves(i)).collect(),
+            ..Bins::default()
+        };
+        let mut cells: Vec<Vec<usize>> = vec![Vec::new(); bins.size[0] * bins.size[1]];
+        for &i in &fixed {
+            let p = &prims[i];
+            bins.each_cell(p.x, p.y, p.bound, |k| cells[k].push(i));
+        }
+        bins.start.push(0);
+        for cell in cells {
+            bins.shapes.extend(cell);
+            bins.start.push(bins.shapes.len());
+        }
+        bins
+    }
+
+    /// Call `f` with each cell the square of half-side `r` about `(x, y)` meets.
+    fn each_cell(&self, x: f64, y: f64, r: f64, mut f: impl FnMut(usize)) {
+        let span = |k: usize, c: f64| {
+            let at = |v: f64| {
+                ((v - self.origin[k]) / BIN)
+                    .floor()
+                    .clamp(0.0, (self.size[k] - 1) as f64)
+            };
+            at(c - r) as usize..=at(c + r) as usize
+        };
+        for j in span(1, y) {
+            for i in span(0, x) {
+                f(j * self.size[0] + i);
+            }
+        }
+    }
+
+    /// Into `out`: the shapes whose bounding circles may come within `reach` of
+    /// `(x, y)`, each once, in their order in the world; None for a world not binned.
+    fn near(&self, x: f64, y: f64, reach: f64, out: &mut Vec<usize>) -> Option<()> {
+        if self.start.is_empty() {
+            return None;
+        }
+        out.clear();
+        out.extend_from_slice(&self.moving);
+        self.each_cell(x, y, reach, |k| {
+            out.extend_from_slice(&self.shapes[self.start[k]..self.start[k + 1]]);
+        });
+        out.sort_unstable();
+        out.dedup();
+        Some(())
+    }
+}
+
+/// One scan from `pose` up to `range_max` against `prims` (binned in `bins`): `hits[i]`
+/// is beam `i`'s nearest hit (`hits` is resized to the fan).
+pub fn scan(
+    prims: &[Prim],
+    bins: &Bins,
+    fan: &Fan,
+    pose: ScannerPose,
+    range_max: f64,
+    hits: &mut Vec<Hit>,
+) {
     let ScannerPose {
         x: ox,
         y: oy,
@@ -185,9 +275,9 @@ pub fn scan(prims: &[Prim], fan: &Fan, pose: ScannerPose, range_max: f64, hits: 
     hits.clear();
     hits.resize(fan.len(), (f64::INFINITY, usize::MAX));
     let (hs, hc) = heading.sin_cos();
-    for p in prims {
+    let mut visit = |p: &Prim| {
         let Some((mid, half)) = interval(p, ox, oy, heading + fan.angle_min, range_max) else {
-            continue;
+            return;
         };
         for beams in fan.beams_within(mid, half) {
             for (hit, &(ux, uy)) in hits[beams.clone()].iter_mut().zip(&fan.dirs[beams]) {
@@ -200,6 +290,11 @@ pub fn scan(prims: &[Prim], fan: &Fan, pose: ScannerPose, range_max: f64, hits: 
                 }
             }
         }
+    };
+    let mut near = Vec::new();
+    match bins.near(ox, oy, range_max, &mut near) {
+        Some(()) => near.iter().for_each(|&i| visit(&prims[i])),
+        None => prims.iter().for_each(visit),
     }
 }
 
@@ -365,7 +460,7 @@ mod tests {
     }
 
     #[test]
-    fn the_broad_phase_scan_equals_every_ray_against_every_shape() {
+    fn the_broad_phase_scan_binned_or_not_equals_every_ray_against_every_shape() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let mut prims: Vec<Prim> = (0..60).map(|k| random_prim(&mut rng, k)).collect();
         // Long walls, often with the scanner inside their bounding circle.
@@ -374,7 +469,10 @@ mod tests {
             let h = rng.random_range(-4.0..4.0);
             prims.push(Prim::rect(k, x, y, h, rng.random_range(10.0..30.0), 0.15));
         }
-        let (mut hits, mut found) = (Vec::new(), 0);
+        // Binned (some shapes taken as moving), and shape by shape.
+        let binned = Bins::new(&prims, |k| k % 7 == 0);
+        assert!(!binned.start.is_empty() && !binned.moving.is_empty());
+        let (mut hits, mut every, mut found) = (Vec::new(), Vec::new(), 0);
         for fov in [270.0f64, 360.0, 180.0] {
             let step = 0.5f64.to_radians();
             let n = (fov / 0.5) as usize + 1;
@@ -387,7 +485,9 @@ mod tests {
                     y: o.1,
                     heading_rad: heading,
                 };
-                scan(&prims, &fan, pose, 12.0, &mut hits);
+                scan(&prims, &Bins::default(), &fan, pose, 12.0, &mut every);
+                scan(&prims, &binned, &fan, pose, 12.0, &mut hits);
+                assert_eq!(hits, every);
                 for (i, hit) in hits.iter().enumerate() {
                     let a = heading + fan.angle_min + i as f64 * step;
                     match cast(&prims, o.0, o.1, a, 12.0) {
