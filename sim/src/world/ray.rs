@@ -1,9 +1,10 @@
 //! The laser's ray caster, specialised for the world's two solid shapes (posts are
 //! circles; boxes and wall segments are oriented rectangles; a wall's joints are
 //! circles), in f64, with a broad phase per scan: a shape is a candidate only when its
-//! bounding circle comes within the scanner's range, and each candidate is tested
-//! only against the beams inside its angular interval (the bearing of its centre
-//! plus or minus the half-angle its bounding circle subtends).
+//! bounding circle comes within the scanner's range (in a world of many shapes, only
+//! those binned near the scanner are looked at: [`Bins`]), and each candidate is
+//! tested only against the beams inside its angular interval (the bearing of its
+//! centre plus or minus the half-angle its bounding circle subtends).
 //!
 //! Semantics are rapier's solid ray cast: a ray starting inside a shape hits it at
 //! range 0; a hit counts up to and including the maximum range; the nearest hit wins.
