@@ -101,28 +101,6 @@ struct Chunk {
     /// Per channel (by MCAP id), each message's log time and offset in `records`.
     index: Vec<Vec<(u64, u64)>>,
     messages: usize,
-    /// The CRC of `records[..crc_upto]`, taken [`CRC_STEP`] bytes at a time as they
-    /// are appended: no burst of work when the chunk closes (on a HIL run's tick
-    /// thread, in an emulated VM, a chunk's CRC in one pass is a stall of its own).
-    crc: crc32fast::Hasher,
-    crc_upto: usize,
-}
-
-/// Bytes of a chunk CRC'd at a time.
-const CRC_STEP: usize = 1 << 16;
-
-impl Chunk {
-    fn append(&mut self, bytes: &[u8]) {
-        self.records.extend_from_slice(bytes);
-        if self.records.len() - self.crc_upto >= CRC_STEP {
-            self.crc_up_to_date();
-        }
-    }
-
-    fn crc_up_to_date(&mut self) {
-        self.crc.update(&self.records[self.crc_upto..]);
-        self.crc_upto = self.records.len();
-    }
 }
 
 /// What the summary section needs, gathered as the file is written.
@@ -187,7 +165,7 @@ impl<W: Write> Inner<W> {
                 .str(&s.encoding)
                 .bytes32(&s.data)
                 .record(op::SCHEMA);
-            self.chunk.append(&record);
+            self.chunk.records.extend_from_slice(&record);
             self.summary.schemas.extend_from_slice(&record);
             self.summary.schema_count += 1;
             id
@@ -203,7 +181,7 @@ impl<W: Write> Inner<W> {
             .str(channel.message_encoding())
             .strings(channel.metadata())
             .record(op::CHANNEL);
-        self.chunk.append(&record);
+        self.chunk.records.extend_from_slice(&record);
         self.summary.channels.extend_from_slice(&record);
         id
     }
@@ -229,8 +207,8 @@ impl<W: Write> Inner<W> {
         header[11..15].copy_from_slice(&self.sequences[k].to_le_bytes());
         header[15..23].copy_from_slice(&time.to_le_bytes());
         header[23..31].copy_from_slice(&time.to_le_bytes());
-        c.append(&header);
-        c.append(msg);
+        c.records.extend_from_slice(&header);
+        c.records.extend_from_slice(msg);
         let s = &mut self.summary;
         s.messages += 1;
         s.start = Some(s.start.map_or(time, |t| t.min(time)));
@@ -243,15 +221,15 @@ impl<W: Write> Inner<W> {
     }
 
     /// Write the chunk (when it holds anything) and its message indexes. The chunk's
-    /// records were CRC'd once, as they came: the data section's CRC takes theirs.
+    /// records are CRC'd once: the data section's CRC takes theirs.
     fn close_chunk(&mut self) -> std::io::Result<()> {
         if self.chunk.records.is_empty() {
             return Ok(());
         }
         let mut c = std::mem::take(&mut self.chunk);
         let chunk_start = self.pos;
-        c.crc_up_to_date();
-        let crc = std::mem::take(&mut c.crc);
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(&c.records);
         let size = c.records.len() as u64;
         let mut head = Body::default()
             .u64(c.start)
@@ -297,7 +275,7 @@ impl<W: Write> Inner<W> {
         // The buffers are kept: a chunk's grows to the chunk size once.
         c.records.clear();
         c.index.iter_mut().for_each(Vec::clear);
-        (c.messages, c.crc_upto) = (0, 0);
+        c.messages = 0;
         self.chunk = c;
         Ok(())
     }
@@ -578,32 +556,6 @@ mod tests {
         );
         let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
         assert_eq!(meta.metadata.get("mode").map(String::as_str), Some("sil"));
-    }
-
-    #[test]
-    fn a_chunk_crcd_step_by_step_as_it_fills_reads_back() {
-        // 100 messages of 3,000 bytes: one chunk, its CRC taken in several steps.
-        let ctx = Context::new();
-        let file = Arc::new(McapFile::create(Vec::new(), 1 << 20).unwrap());
-        ctx.add_sink(Arc::clone(&file) as Arc<dyn Sink>);
-        let a = ctx
-            .channel_builder("/a")
-            .message_encoding("raw")
-            .build_raw()
-            .unwrap();
-        for k in 0..100u8 {
-            a.log_with_meta(&[k; 3_000], PartialMetadata::with_log_time(u64::from(k)));
-        }
-        let bytes = file.close().unwrap();
-        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-        assert_eq!(summary.chunk_indexes.len(), 1);
-        let checked = mcap::read::Options::ValidateChunkCrcs.into();
-        let read: Vec<_> = mcap::MessageStream::new_with_options(&bytes, checked)
-            .unwrap()
-            .collect::<Result<_, _>>()
-            .unwrap();
-        assert_eq!(read.len(), 100);
-        assert_eq!(read[42].data.as_ref(), &[42u8; 3_000][..]);
     }
 
     #[test]
