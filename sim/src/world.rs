@@ -180,11 +180,9 @@ impl World {
                     motion,
                     ..
                 } => (*x, *y, heading_deg.to_radians(), motion),
+                // Walls never move: not among the movers.
                 Obstacle::Wall { .. } => continue,
             };
-            if motion.is_none() {
-                continue;
-            }
             let (x, y) = position_at(x0, y0, motion, t);
             for p in self.prims.get_mut(b.prims.clone()).into_iter().flatten() {
                 (p.x, p.y) = (x, y);
