@@ -1,6 +1,7 @@
 //! Every run recorded at the simulator's side of the wires, in formats others read:
 //!
-//! - `run.mcap` (Foxglove SDK, its built-in schemas): the laser as
+//! - `run.mcap` (the Foxglove SDK's built-in schemas, written by the controller
+//!   library's `McapFile`): the laser as
 //!   `foxglove.LaserScan`, the fix as `foxglove.LocationFix`, the car as
 //!   `foxglove.FrameTransform` (world -> base_link, with the scenario's sensor mounts
 //!   base_link -> laser and base_link -> gps) and `foxglove.PoseInFrame`, obstacles and the
