@@ -279,7 +279,11 @@ fn drive(args: RunArgs) -> Result<ExitCode> {
         rt = rt.with_fix_timing();
     }
     if let Some(w) = trace {
-        rt = rt.with_trace(w);
+        // In lockstep, each tick's records are in the file before it is acknowledged.
+        rt = rt.with_trace(match lockstep {
+            Some(_) => w.flushing_every_update(),
+            None => w,
+        });
     }
     // After the planning thread started, so that it stays an ordinary thread.
     let rt_sched = realtime::promote(args.rt_priority);

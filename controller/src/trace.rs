@@ -189,6 +189,8 @@ pub struct TraceWriter<W: Write = std::fs::File> {
     fixes: usize,
     mode: Option<Mode>,
     last_flush: f64,
+    /// Every update reaches the file ([`TraceWriter::flushing_every_update`]).
+    every_update: bool,
 }
 
 impl<W: Write> TraceWriter<W> {
@@ -206,7 +208,17 @@ impl<W: Write> TraceWriter<W> {
             fixes: 0,
             mode: None,
             last_flush: f64::NEG_INFINITY,
+            every_update: false,
         })
+    }
+
+    /// The writer with every update written through to the file, as a lockstep
+    /// controller needs: a tick acknowledged is then in the file, so that a controller
+    /// killed between ticks leaves the trace SIL's in-memory one is (up to the last
+    /// tick taken), not one short of the buffer it had not written yet.
+    pub fn flushing_every_update(mut self) -> Self {
+        self.every_update = true;
+        self
     }
 
     fn record(&mut self, r: &TraceRecord) -> std::io::Result<()> {
@@ -253,6 +265,8 @@ impl<W: Write> TraceWriter<W> {
             }))?;
             self.flush()?;
             self.last_flush = now;
+        } else if self.every_update {
+            self.flush()?;
         }
         Ok(())
     }
@@ -277,5 +291,70 @@ impl<W: Write> TraceWriter<W> {
     ) -> std::io::Result<()> {
         self.last_flush = f64::NEG_INFINITY;
         self.update(now, ctl, fixes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ControllerConfig;
+    use crate::guidance::follower::FollowInputs;
+    use crate::localisation::Pose;
+    use std::sync::{Arc, Mutex};
+
+    /// A file whose bytes the test can look at while the writer holds it.
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// The samples in the file after a first update and one more sample 10 ms later.
+    fn samples_in_file(flushing: bool) -> usize {
+        let file = Shared::default();
+        let mut w = TraceWriter::new(Some(file.clone()), None).unwrap();
+        if flushing {
+            w = w.flushing_every_update();
+        }
+        let mut ctl = Controller::new(&ControllerConfig::default()).unwrap();
+        w.update(0.0, &ctl, &[]).unwrap();
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: 0.0,
+            phi: 0.0,
+        };
+        let inputs = FollowInputs {
+            e_y: 0.01,
+            e_theta: 0.0,
+            phi_ref: 0.0,
+            v: 0.0,
+        };
+        ctl.samples.push(Sample {
+            t: 0.01,
+            pose,
+            inputs,
+            steer_cmd: 0.0,
+            speed_cmd: 0.0,
+        });
+        w.update(0.01, &ctl, &[]).unwrap();
+        let text = String::from_utf8(file.0.lock().unwrap().clone()).unwrap();
+        Trace::from_jsonl(&text).unwrap().samples.len()
+    }
+
+    #[test]
+    fn a_lockstep_trace_has_every_update_in_its_file_at_once() {
+        // Within the second between flushes, the sample waits in the buffer...
+        assert_eq!(samples_in_file(false), 0);
+        // ... unless every update is written through (lockstep).
+        assert_eq!(samples_in_file(true), 1);
     }
 }
