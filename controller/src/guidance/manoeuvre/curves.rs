@@ -1,12 +1,19 @@
-//! Reeds-Shepp curves (Reeds and Shepp 1990: the shortest paths of a car that drives
-//! forward and backward at a bounded curvature) from the `reeds_shepp` crate, which
-//! computes the 12 base words in their 4 symmetries for a unit turning radius. Here
-//! they are scaled to the car's turning radius, turned into arcs of signed length and
-//! curvature, and verified: a word whose integrated end misses the goal is dropped, so
-//! a defect in a formula can cost a curve, never a wrong one.
+//! Reeds-Shepp curves (Reeds and Shepp 1990, "Optimal paths for a car that goes both
+//! forwards and backwards": the shortest paths of a car that drives forward and backward
+//! at a bounded curvature). The five families of the paper's formulas (8.1-8.11: CSC,
+//! CCC, CCCC, CCSC, CCSCC) are solved in units of the turning radius for the goal in the
+//! start's frame, each in the symmetries that make up the 48 words: time flip (driven
+//! backwards), reflection (left for right) and, for CCC and CCSC, backwards (the word
+//! read from its end). Words are only lengths on the stack until one is taken; a taken
+//! word is scaled to the car's turning radius, turned into arcs of signed length and
+//! curvature, and verified: one whose integrated end misses the goal is dropped, so a
+//! defect in a formula can cost a curve, never a wrong one (a test checks the shortest
+//! lengths against the `reeds_shepp` crate's). The heuristic of the search takes the
+//! shortest of them at every node it takes out of its queue: the crate's
+//! `get_all_paths`, which builds every word as a vector, was a quarter of a search.
 
 use super::path::{PathPoint, turned_arc};
-use reeds_shepp_lib as rs;
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 /// A curve's integrated end may miss the goal by this much and still be taken, metres
 /// and radians.
@@ -84,51 +91,13 @@ impl Curve {
 }
 
 /// Every verified Reeds-Shepp curve from `from` to `to` (x, y, heading) for the turning
-/// radius `radius`, shortest first; each verified as it is taken (the search's
-/// heuristic takes one).
+/// radius `radius`, shortest first (the earlier word of equal ones); each made a curve
+/// and verified as it is taken (the search's heuristic takes one).
 pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> impl Iterator<Item = Curve> {
-    // The crate works in units of the turning radius, with headings in degrees.
-    let pose = |p: [f64; 3]| rs::Pose {
-        x: p[0] / radius,
-        y: p[1] / radius,
-        theta_degree: p[2].to_degrees(),
-    };
-    let words = rs::get_all_paths(pose(from), pose(to));
-    // Only the lengths at first: the heuristic takes the first curve that verifies, the
-    // analytic expansion a few, so each is made a curve when its turn comes (the
-    // shortest left, the earlier word of equal ones, as a stable sort would order them).
-    let mut left: Vec<(f64, usize)> = words
-        .iter()
-        .map(|w| w.iter().map(|e| arc_of(e, radius).length).sum())
-        .enumerate()
-        .filter(|&(_, length): &(usize, f64)| length.is_finite())
-        .map(|(k, length)| (length, k))
-        .collect();
-    std::iter::from_fn(move || {
-        let (next, _) = left
-            .iter()
-            .enumerate()
-            .min_by(|(_, a), (_, b)| a.0.total_cmp(&b.0))?;
-        let (length, k) = left.remove(next);
-        Some(Curve {
-            arcs: words[k].iter().map(|e| arc_of(e, radius)).collect(),
-            length,
-        })
-    })
-    .filter(move |c| reaches(c.end(from), to))
-}
-
-/// One of the crate's words as an arc for the turning radius `radius`.
-fn arc_of(w: &rs::PathElement, radius: f64) -> Arc {
-    Arc {
-        length: w.param.abs() * radius,
-        curvature: match w.steering {
-            rs::Steering::Left => 1.0 / radius,
-            rs::Steering::Right => -1.0 / radius,
-            rs::Steering::Straight => 0.0,
-        },
-        forward: w.gear == rs::Gear::Forward,
-    }
+    let mut words = Words::between(from, to, radius);
+    std::iter::from_fn(move || words.take_shortest())
+        .map(move |w| w.curve(radius))
+        .filter(move |c| reaches(c.end(from), to))
 }
 
 /// The shortest curve's length from `from` to `to`: the non-holonomic heuristic
@@ -142,6 +111,297 @@ pub fn shortest(from: [f64; 3], to: [f64; 3], radius: f64) -> f64 {
 fn reaches(end: [f64; 3], to: [f64; 3]) -> bool {
     let heading = super::super::frame::wrap(end[2] - to[2]).abs();
     (end[0] - to[0]).hypot(end[1] - to[1]) < END_TOLERANCE && heading < END_TOLERANCE
+}
+
+/// A segment's steering.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Steer {
+    Left,
+    Straight,
+    Right,
+}
+
+use Steer::{Left as L, Right as R, Straight as S};
+
+/// A word: up to five segments, each a steering and a signed length in turning radii
+/// (radians for a turn), negative backwards.
+#[derive(Clone, Copy, Debug)]
+struct Word {
+    segments: [(Steer, f64); 5],
+    n: usize,
+    length: f64,
+}
+
+impl Word {
+    fn new(steers: &[Steer], lengths: &[f64]) -> Word {
+        let mut segments = [(S, 0.0); 5];
+        for (k, (&steer, &l)) in steers.iter().zip(lengths).enumerate() {
+            segments[k] = (steer, l);
+        }
+        Word {
+            segments,
+            n: steers.len(),
+            length: lengths.iter().map(|l| l.abs()).sum(),
+        }
+    }
+
+    /// The word as a curve for the turning radius `radius`, its segments of no length
+    /// left out.
+    fn curve(&self, radius: f64) -> Curve {
+        let arcs: Vec<Arc> = self.segments[..self.n]
+            .iter()
+            .filter(|(_, l)| *l != 0.0)
+            .map(|&(steer, l)| Arc {
+                length: l.abs() * radius,
+                curvature: match steer {
+                    L => 1.0 / radius,
+                    R => -1.0 / radius,
+                    S => 0.0,
+                },
+                forward: l > 0.0,
+            })
+            .collect();
+        Curve {
+            length: self.length * radius,
+            arcs,
+        }
+    }
+}
+
+/// Formulas' solutions within this of their bounds still count (rounding).
+const ZERO: f64 = 1e-10;
+
+/// `a` wrapped into [-pi, pi].
+fn wrap(a: f64) -> f64 {
+    let v = a % TAU;
+    if v < -PI {
+        v + TAU
+    } else if v > PI {
+        v - TAU
+    } else {
+        v
+    }
+}
+
+fn polar(x: f64, y: f64) -> (f64, f64) {
+    (x.hypot(y), y.atan2(x))
+}
+
+/// The 48 words' solutions between two poses, as lengths, on the stack.
+struct Words {
+    list: [Word; 48],
+    n: usize,
+}
+
+/// A base formula: the goal (x, y, phi) in the start's frame, radius 1, to the word's
+/// free lengths (t, u, v), if it has a solution.
+type Formula = fn(f64, f64, f64) -> Option<(f64, f64, f64)>;
+/// How a formula's (t, u, v) make its word's lengths.
+type Make = fn(f64, f64, f64) -> [f64; 5];
+
+impl Words {
+    fn between(from: [f64; 3], to: [f64; 3], radius: f64) -> Words {
+        let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
+        let (s, c) = from[2].sin_cos();
+        let x = (dx * c + dy * s) / radius;
+        let y = (-dx * s + dy * c) / radius;
+        let phi = wrap(to[2] - from[2]);
+        // The goal as the backwards words see it: the start in the goal's frame.
+        let (sp, cp) = phi.sin_cos();
+        let back = (x * cp + y * sp, x * sp - y * cp, phi);
+        let ahead = (x, y, phi);
+        let mut w = Words {
+            list: [Word::new(&[], &[]); 48],
+            n: 0,
+        };
+        let tuv: Make = |t, u, v| [t, u, v, 0.0, 0.0];
+        let vut: Make = |t, u, v| [v, u, t, 0.0, 0.0];
+        let quarter: Make = |t, u, v| [t, -FRAC_PI_2, u, v, 0.0];
+        let quarter_back: Make = |t, u, v| [v, u, -FRAC_PI_2, t, 0.0];
+        // CSC (8.1, 8.2).
+        w.symmetric(ahead, lsl, &[L, S, L], tuv);
+        w.symmetric(ahead, lsr, &[L, S, R], tuv);
+        // CCC (8.3, 8.4).
+        w.symmetric(ahead, lrl, &[L, R, L], tuv);
+        w.symmetric(back, lrl, &[L, R, L], vut);
+        // CCCC (8.7, 8.8).
+        w.symmetric(ahead, lrlr_same, &[L, R, L, R], |t, u, v| {
+            [t, u, -u, v, 0.0]
+        });
+        w.symmetric(ahead, lrlr_opposite, &[L, R, L, R], |t, u, v| {
+            [t, u, u, v, 0.0]
+        });
+        // CCSC (8.9, 8.10).
+        w.symmetric(ahead, lrsl, &[L, R, S, L], quarter);
+        w.symmetric(ahead, lrsr, &[L, R, S, R], quarter);
+        w.symmetric(back, lrsl, &[L, S, R, L], quarter_back);
+        w.symmetric(back, lrsr, &[R, S, R, L], quarter_back);
+        // CCSCC (8.11).
+        w.symmetric(ahead, lrslr, &[L, R, S, L, R], |t, u, v| {
+            [t, -FRAC_PI_2, u, -FRAC_PI_2, v]
+        });
+        w
+    }
+
+    /// `f` for the goal `(x, y, phi)` in the four symmetries: as it is, time-flipped
+    /// (every length negated), reflected (left and right swapped) and both.
+    fn symmetric(
+        &mut self,
+        (x, y, phi): (f64, f64, f64),
+        f: Formula,
+        steers: &[Steer],
+        make: Make,
+    ) {
+        let n = steers.len();
+        let mut reflected = [S; 5];
+        for (r, s) in reflected.iter_mut().zip(steers) {
+            *r = match s {
+                L => R,
+                R => L,
+                S => S,
+            };
+        }
+        let cases = [
+            (x, y, phi, false, false),
+            (-x, y, -phi, true, false),
+            (x, -y, -phi, false, true),
+            (-x, -y, phi, true, true),
+        ];
+        for (x, y, phi, flip, reflect) in cases {
+            if let Some((t, u, v)) = f(x, y, phi) {
+                let sign = if flip { -1.0 } else { 1.0 };
+                let lengths = make(t, u, v).map(|l| sign * l);
+                let steers = if reflect { &reflected[..n] } else { steers };
+                self.list[self.n] = Word::new(steers, &lengths[..n]);
+                self.n += 1;
+            }
+        }
+    }
+
+    /// The shortest word left (the earlier of equal ones), taken out.
+    fn take_shortest(&mut self) -> Option<Word> {
+        let mut best: Option<usize> = None;
+        for (k, w) in self.list[..self.n].iter().enumerate() {
+            if best.is_none_or(|b| w.length < self.list[b].length) {
+                best = Some(k);
+            }
+        }
+        let k = best?;
+        let w = self.list[k];
+        self.list.copy_within(k + 1..self.n, k);
+        self.n -= 1;
+        Some(w)
+    }
+}
+
+/// L+ S+ L+ (8.1).
+fn lsl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (u, t) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+    let v = wrap(phi - t);
+    (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
+}
+
+/// L+ S+ R+ (8.2).
+fn lsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (r, t1) = polar(x + phi.sin(), y - 1.0 - phi.cos());
+    if r * r < 4.0 {
+        return None;
+    }
+    let u = (r * r - 4.0).sqrt();
+    let t = wrap(t1 + 2.0f64.atan2(u));
+    let v = wrap(t - phi);
+    (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
+}
+
+/// L+ R- L (8.3, 8.4 read backwards).
+fn lrl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (r, theta) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+    if r > 4.0 {
+        return None;
+    }
+    let u = -2.0 * (0.25 * r).asin();
+    let t = wrap(theta + 0.5 * u + PI);
+    let v = wrap(phi - t + u);
+    (t >= -ZERO && u <= ZERO).then_some((t, u, v))
+}
+
+/// (t, v) of the CCCC words.
+fn tau_omega(u: f64, v: f64, xi: f64, eta: f64, phi: f64) -> (f64, f64) {
+    let delta = wrap(u - v);
+    let a = u.sin() - delta.sin();
+    let b = u.cos() - delta.cos() - 1.0;
+    let t1 = (eta * a - xi * b).atan2(xi * a + eta * b);
+    let t2 = 2.0 * (delta.cos() - v.cos() - u.cos()) + 3.0;
+    let tau = if t2 < 0.0 { wrap(t1 + PI) } else { wrap(t1) };
+    (tau, wrap(tau - u + v - phi))
+}
+
+/// L+ Ru+ Lu- R- (8.7): the middle turns of equal length, opposite directions.
+fn lrlr_same(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+    let rho = 0.25 * (2.0 + xi.hypot(eta));
+    if rho > 1.0 {
+        return None;
+    }
+    let u = rho.acos();
+    let (t, v) = tau_omega(u, -u, xi, eta, phi);
+    (t >= -ZERO && v <= ZERO).then_some((t, u, v))
+}
+
+/// L+ Ru- Lu- R+ (8.8): the middle turns of equal length, both backwards.
+fn lrlr_opposite(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+    let rho = (20.0 - xi * xi - eta * eta) / 16.0;
+    if !(0.0..=1.0).contains(&rho) {
+        return None;
+    }
+    let u = -rho.acos();
+    if u < -FRAC_PI_2 {
+        return None;
+    }
+    let (t, v) = tau_omega(u, u, xi, eta, phi);
+    (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
+}
+
+/// L+ R-(π/2) S- L- (8.9).
+fn lrsl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (rho, theta) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+    if rho < 2.0 {
+        return None;
+    }
+    let r = (rho * rho - 4.0).sqrt();
+    let u = 2.0 - r;
+    let t = wrap(theta + r.atan2(-2.0));
+    let v = wrap(phi - FRAC_PI_2 - t);
+    (t >= -ZERO && u <= ZERO && v <= ZERO).then_some((t, u, v))
+}
+
+/// L+ R-(π/2) S- R- (8.10).
+fn lrsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+    let (rho, t) = polar(-eta, xi);
+    if rho < 2.0 {
+        return None;
+    }
+    let u = 2.0 - rho;
+    let v = wrap(t + FRAC_PI_2 - phi);
+    (t >= -ZERO && u <= ZERO && v <= ZERO).then_some((t, u, v))
+}
+
+/// L+ R-(π/2) S- L-(π/2) R+ (8.11).
+fn lrslr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
+    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+    let rho = xi.hypot(eta);
+    if rho < 2.0 {
+        return None;
+    }
+    let u = 4.0 - (rho * rho - 4.0).sqrt();
+    if u > ZERO {
+        return None;
+    }
+    let t = wrap(((4.0 - u) * xi - 2.0 * eta).atan2(-2.0 * xi + (u - 4.0) * eta));
+    let v = wrap(t - phi);
+    (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
 #[cfg(test)]
@@ -174,6 +434,64 @@ mod tests {
         // Straight back: the same, in reverse.
         let back = &curves([0.0, 0.0, 0.0], [-3.0, 0.0, 0.0], r).collect::<Vec<_>>()[0];
         assert!((back.length - 3.0).abs() < 1e-9 && !back.arcs[0].forward);
+    }
+
+    /// The crate's curves from `from` to `to`, verified as ours are.
+    fn the_crates(from: [f64; 3], to: [f64; 3], radius: f64) -> Vec<Curve> {
+        use reeds_shepp_lib as rs;
+        let pose = |p: [f64; 3]| rs::Pose {
+            x: p[0] / radius,
+            y: p[1] / radius,
+            theta_degree: p[2].to_degrees(),
+        };
+        let arc = |e: &rs::PathElement| Arc {
+            length: e.param.abs() * radius,
+            curvature: match e.steering {
+                rs::Steering::Left => 1.0 / radius,
+                rs::Steering::Right => -1.0 / radius,
+                rs::Steering::Straight => 0.0,
+            },
+            forward: e.gear == rs::Gear::Forward,
+        };
+        rs::get_all_paths(pose(from), pose(to))
+            .iter()
+            .map(|w| {
+                let arcs: Vec<Arc> = w.iter().map(arc).collect();
+                let length = arcs.iter().map(|a| a.length).sum();
+                Curve { arcs, length }
+            })
+            .filter(|c| c.length.is_finite() && reaches(c.end(from), to))
+            .collect()
+    }
+
+    #[test]
+    fn the_shortest_curve_is_as_long_as_the_reeds_shepp_crates_everywhere() {
+        let r = 2.6;
+        let mut compared = 0;
+        for i in -6..=6 {
+            for j in -6..=6 {
+                for k in 0..16 {
+                    let from = [0.3, -0.2, 0.4];
+                    let to = [
+                        1.1 * f64::from(i),
+                        0.9 * f64::from(j),
+                        f64::from(k) * 0.41 - 3.1,
+                    ];
+                    let ours = shortest(from, to, r);
+                    let theirs = the_crates(from, to, r)
+                        .iter()
+                        .map(|c| c.length)
+                        .fold(f64::INFINITY, f64::min);
+                    assert!(ours.is_finite(), "no curve to {to:?}");
+                    assert!(
+                        (ours - theirs).abs() < 1e-9,
+                        "{to:?}: {ours} against {theirs}"
+                    );
+                    compared += 1;
+                }
+            }
+        }
+        assert_eq!(compared, 13 * 13 * 16);
     }
 
     #[test]
