@@ -147,14 +147,20 @@ impl ManoeuvreRequest {
     /// centre). None: every obstacle as it is.
     fn field_at(&self, shrink: Option<[f64; 3]>) -> Field {
         let (lo, hi) = self.window();
-        let f = &self.footprint;
+        let discs = self.discs(shrink, &self.footprint);
+        Field::new(lo, hi, FIELD_RES, discs, self.footprint).with_seen(self.seen.clone())
+    }
+
+    /// The obstacles and the remembered returns as discs, shrunk for the rectangle `f`
+    /// standing at `shrink` ([`ManoeuvreRequest::field_at`]).
+    fn discs(&self, shrink: Option<[f64; 3]>, f: &Footprint) -> Vec<Disc> {
         let cell = crate::perception::SEEN_CELL * std::f64::consts::FRAC_1_SQRT_2;
         let remembered = self.remembered.iter().map(|h| Disc {
             x: h[0],
             y: h[1],
             r: cell,
         });
-        let discs = discs(&self.obstacles)
+        discs(&self.obstacles)
             .into_iter()
             .chain(remembered)
             .map(|d| match shrink {
@@ -166,8 +172,7 @@ impl ManoeuvreRequest {
                 },
                 None => d,
             })
-            .collect();
-        Field::new(lo, hi, FIELD_RES, discs, self.footprint).with_seen(self.seen.clone())
+            .collect()
     }
 
     /// The window the field covers: round the start and the goals (and the manoeuvre
@@ -197,28 +202,32 @@ impl ManoeuvreRequest {
     /// over the next [`HOLD_AHEAD`] samples, with the car within [`OFF_PATH`] of it (and,
     /// standing, within [`STAND_HEADING`] of its heading).
     pub fn following_holds(&self) -> bool {
-        let margin = self.following_margin.unwrap_or(self.footprint.margin);
-        let field = ManoeuvreRequest {
-            footprint: Footprint {
-                margin: (margin - HOLD_SLACK.min(0.4 * margin)).max(0.0),
-                ..self.footprint
-            },
-            ..self.clone()
+        let Some(m) = &self.following else {
+            return false;
+        };
+        let on = m
+            .points
+            .iter()
+            .take(OFF_PATH_LOOK)
+            .any(|p| (p.x - self.start[0]).hypot(p.y - self.start[1]) <= OFF_PATH);
+        let askew = self.standing
+            && m.points
+                .first()
+                .is_some_and(|p| wrap(p.theta - self.start[2]).abs() > STAND_HEADING);
+        if !(on && !askew || m.points.is_empty()) {
+            return false;
         }
-        .field();
-        self.following.as_ref().is_some_and(|m| {
-            let on = m
-                .points
-                .iter()
-                .take(OFF_PATH_LOOK)
-                .any(|p| (p.x - self.start[0]).hypot(p.y - self.start[1]) <= OFF_PATH);
-            let askew = self.standing
-                && m.points
-                    .first()
-                    .is_some_and(|p| wrap(p.theta - self.start[2]).abs() > STAND_HEADING);
-            (on && !askew || m.points.is_empty())
-                && m.points.iter().take(HOLD_AHEAD).all(|p| field.passable(p))
-        })
+        let margin = self.following_margin.unwrap_or(self.footprint.margin);
+        let footprint = Footprint {
+            margin: (margin - HOLD_SLACK.min(0.4 * margin)).max(0.0),
+            ..self.footprint
+        };
+        // Decided exactly for the few samples looked at: no distances over the window.
+        let (lo, hi) = self.window();
+        let discs = self.discs(Some(self.start), &footprint);
+        let field =
+            Field::exact_only(lo, hi, FIELD_RES, discs, footprint).with_seen(self.seen.clone());
+        m.points.iter().take(HOLD_AHEAD).all(|p| field.passable(p))
     }
 
     /// Search towards each goal the field clears in turn ([`GOALS_SEARCHED`] at most),
