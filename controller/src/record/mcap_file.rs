@@ -135,7 +135,11 @@ enum Job {
     Chunk(Chunk),
     /// Write a record outside the chunks (`opcode` names its index: metadata or
     /// attachment); its index is its offset and length, then `tail`.
-    Outside { record: Vec<u8>, opcode: u8, tail: Body },
+    Outside {
+        record: Vec<u8>,
+        opcode: u8,
+        tail: Body,
+    },
     /// Hand what was written on.
     Flush,
     /// Write the data section's end, the summary section and the footer.
@@ -724,7 +728,9 @@ mod tests {
             file.flush().err()
         });
         assert!(
-            failed.as_ref().is_some_and(|e| e.to_string() == "disk full"),
+            failed
+                .as_ref()
+                .is_some_and(|e| e.to_string() == "disk full"),
             "{failed:?}"
         );
         let closed = file.close().map(|_| ());
