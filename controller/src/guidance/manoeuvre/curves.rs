@@ -1,18 +1,21 @@
 //! Reeds-Shepp curves (Reeds and Shepp 1990, "Optimal paths for a car that goes both
 //! forwards and backwards": the shortest paths of a car that drives forward and backward
-//! at a bounded curvature). The five families of the paper's formulas (8.1-8.11: CSC,
-//! CCC, CCCC, CCSC, CCSCC) are solved in units of the turning radius for the goal in the
-//! start's frame, each in the symmetries that make up the 48 words: time flip (driven
-//! backwards), reflection (left for right) and, for CCC and CCSC, backwards (the word
-//! read from its end). Words are only lengths on the stack until one is taken; a taken
-//! word is scaled to the car's turning radius, turned into arcs of signed length and
-//! curvature, and verified: one whose integrated end misses the goal is dropped, so a
-//! defect in a formula can cost a curve, never a wrong one (a test checks the shortest
-//! lengths against the `reeds_shepp` crate's). The heuristic of the search takes the
-//! shortest of them at every node it takes out of its queue: the crate's
-//! `get_all_paths`, which builds every word as a vector, was a quarter of a search.
+//! at a bounded curvature), for the car's turning radius, as arcs of signed length and
+//! curvature, each verified: a curve whose integrated end misses the goal is dropped,
+//! so a defect in a formula can cost a curve, never a wrong one.
+//!
+//! The analytic expansion takes the `reeds_shepp` crate's curves ([`curves`]): its 12
+//! formulas in 4 symmetries give 48 candidates, some of them variants beyond the
+//! canonical words, and the search tries the few shortest that its map clears. The
+//! heuristic needs one number, the shortest length, at every node the search takes out
+//! of its queue ([`shortest`]): through the crate that built all 48 candidates as
+//! vectors, a quarter of a search. Ours solves the five families of the paper's
+//! formulas (8.1-8.11: CSC, CCC, CCCC, CCSC, CCSCC) in their time-flip, reflection and
+//! backwards symmetries as lengths on the stack, and makes a curve of the shortest
+//! only, to verify it; a test checks the lengths against the crate's.
 
 use super::path::{PathPoint, turned_arc};
+use reeds_shepp_lib as rs;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 /// A curve's integrated end may miss the goal by this much and still be taken, metres
@@ -91,20 +94,61 @@ impl Curve {
 }
 
 /// Every verified Reeds-Shepp curve from `from` to `to` (x, y, heading) for the turning
-/// radius `radius`, shortest first (the earlier word of equal ones); each made a curve
-/// and verified as it is taken (the search's heuristic takes one).
+/// radius `radius`, shortest first; each verified as it is taken (the search's
+/// heuristic takes one).
 pub fn curves(from: [f64; 3], to: [f64; 3], radius: f64) -> impl Iterator<Item = Curve> {
-    let mut words = Words::between(from, to, radius);
-    std::iter::from_fn(move || words.take_shortest())
-        .map(move |w| w.curve(radius))
-        .filter(move |c| reaches(c.end(from), to))
+    // The crate works in units of the turning radius, with headings in degrees.
+    let pose = |p: [f64; 3]| rs::Pose {
+        x: p[0] / radius,
+        y: p[1] / radius,
+        theta_degree: p[2].to_degrees(),
+    };
+    let words = rs::get_all_paths(pose(from), pose(to));
+    // Only the lengths at first: the heuristic takes the first curve that verifies, the
+    // analytic expansion a few, so each is made a curve when its turn comes (the
+    // shortest left, the earlier word of equal ones, as a stable sort would order them).
+    let mut left: Vec<(f64, usize)> = words
+        .iter()
+        .map(|w| w.iter().map(|e| arc_of(e, radius).length).sum())
+        .enumerate()
+        .filter(|&(_, length): &(usize, f64)| length.is_finite())
+        .map(|(k, length)| (length, k))
+        .collect();
+    std::iter::from_fn(move || {
+        let (next, _) = left
+            .iter()
+            .enumerate()
+            .min_by(|(_, a), (_, b)| a.0.total_cmp(&b.0))?;
+        let (length, k) = left.remove(next);
+        Some(Curve {
+            arcs: words[k].iter().map(|e| arc_of(e, radius)).collect(),
+            length,
+        })
+    })
+    .filter(move |c| reaches(c.end(from), to))
+}
+
+/// One of the crate's words as an arc for the turning radius `radius`.
+fn arc_of(w: &rs::PathElement, radius: f64) -> Arc {
+    Arc {
+        length: w.param.abs() * radius,
+        curvature: match w.steering {
+            rs::Steering::Left => 1.0 / radius,
+            rs::Steering::Right => -1.0 / radius,
+            rs::Steering::Straight => 0.0,
+        },
+        forward: w.gear == rs::Gear::Forward,
+    }
 }
 
 /// The shortest curve's length from `from` to `to`: the non-holonomic heuristic
-/// without obstacles. Infinite when no curve verifies.
+/// without obstacles, from our words (the same lengths as the crate's, a test says),
+/// the shortest that verifies. Infinite when none does.
 pub fn shortest(from: [f64; 3], to: [f64; 3], radius: f64) -> f64 {
-    curves(from, to, radius)
-        .next()
+    let mut words = Words::between(from, to, radius);
+    std::iter::from_fn(move || words.take_shortest())
+        .map(|w| w.curve(radius))
+        .find(|c| reaches(c.end(from), to))
         .map_or(f64::INFINITY, |c| c.length)
 }
 
@@ -436,34 +480,6 @@ mod tests {
         assert!((back.length - 3.0).abs() < 1e-9 && !back.arcs[0].forward);
     }
 
-    /// The crate's curves from `from` to `to`, verified as ours are.
-    fn the_crates(from: [f64; 3], to: [f64; 3], radius: f64) -> Vec<Curve> {
-        use reeds_shepp_lib as rs;
-        let pose = |p: [f64; 3]| rs::Pose {
-            x: p[0] / radius,
-            y: p[1] / radius,
-            theta_degree: p[2].to_degrees(),
-        };
-        let arc = |e: &rs::PathElement| Arc {
-            length: e.param.abs() * radius,
-            curvature: match e.steering {
-                rs::Steering::Left => 1.0 / radius,
-                rs::Steering::Right => -1.0 / radius,
-                rs::Steering::Straight => 0.0,
-            },
-            forward: e.gear == rs::Gear::Forward,
-        };
-        rs::get_all_paths(pose(from), pose(to))
-            .iter()
-            .map(|w| {
-                let arcs: Vec<Arc> = w.iter().map(arc).collect();
-                let length = arcs.iter().map(|a| a.length).sum();
-                Curve { arcs, length }
-            })
-            .filter(|c| c.length.is_finite() && reaches(c.end(from), to))
-            .collect()
-    }
-
     #[test]
     fn the_shortest_curve_is_as_long_as_the_reeds_shepp_crates_everywhere() {
         let r = 2.6;
@@ -478,10 +494,8 @@ mod tests {
                         f64::from(k) * 0.41 - 3.1,
                     ];
                     let ours = shortest(from, to, r);
-                    let theirs = the_crates(from, to, r)
-                        .iter()
-                        .map(|c| c.length)
-                        .fold(f64::INFINITY, f64::min);
+                    // The crate's curves, shortest first.
+                    let theirs = curves(from, to, r).next().map_or(f64::NAN, |c| c.length);
                     assert!(ours.is_finite(), "no curve to {to:?}");
                     assert!(
                         (ours - theirs).abs() < 1e-9,
