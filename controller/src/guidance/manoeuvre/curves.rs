@@ -237,9 +237,20 @@ struct Words {
     n: usize,
 }
 
-/// A base formula: the goal (x, y, phi) in the start's frame, radius 1, to the word's
-/// free lengths (t, u, v), if it has a solution.
-type Formula = fn(f64, f64, f64) -> Option<(f64, f64, f64)>;
+/// The goal in the start's frame, radius 1: x, y, the heading phi and its sine and
+/// cosine (computed once for the four symmetries: sin(-phi) = -sin(phi)).
+#[derive(Clone, Copy)]
+struct Rel {
+    x: f64,
+    y: f64,
+    phi: f64,
+    sin: f64,
+    cos: f64,
+}
+
+/// A base formula: the goal in the start's frame to the word's free lengths (t, u, v),
+/// if it has a solution.
+type Formula = fn(Rel) -> Option<(f64, f64, f64)>;
 /// How a formula's (t, u, v) make its word's lengths.
 type Make = fn(f64, f64, f64) -> [f64; 5];
 
@@ -251,9 +262,19 @@ impl Words {
         let y = (-dx * s + dy * c) / radius;
         let phi = wrap(to[2] - from[2]);
         // The goal as the backwards words see it: the start in the goal's frame.
-        let (sp, cp) = phi.sin_cos();
-        let back = (x * cp + y * sp, x * sp - y * cp, phi);
-        let ahead = (x, y, phi);
+        let (sin, cos) = phi.sin_cos();
+        let ahead = Rel {
+            x,
+            y,
+            phi,
+            sin,
+            cos,
+        };
+        let back = Rel {
+            x: x * cos + y * sin,
+            y: x * sin - y * cos,
+            ..ahead
+        };
         let mut w = Words {
             list: [Word::new(&[], &[]); 48],
             n: 0,
@@ -287,15 +308,9 @@ impl Words {
         w
     }
 
-    /// `f` for the goal `(x, y, phi)` in the four symmetries: as it is, time-flipped
-    /// (every length negated), reflected (left and right swapped) and both.
-    fn symmetric(
-        &mut self,
-        (x, y, phi): (f64, f64, f64),
-        f: Formula,
-        steers: &[Steer],
-        make: Make,
-    ) {
+    /// `f` for the goal `g` in the four symmetries: as it is, time-flipped (every
+    /// length negated), reflected (left and right swapped) and both.
+    fn symmetric(&mut self, g: Rel, f: Formula, steers: &[Steer], make: Make) {
         let n = steers.len();
         let mut reflected = [S; 5];
         for (r, s) in reflected.iter_mut().zip(steers) {
@@ -305,14 +320,28 @@ impl Words {
                 S => S,
             };
         }
+        let Rel {
+            x,
+            y,
+            phi,
+            sin,
+            cos,
+        } = g;
+        let mirrored = |x, y, phi, sin| Rel {
+            x,
+            y,
+            phi,
+            sin,
+            cos,
+        };
         let cases = [
-            (x, y, phi, false, false),
-            (-x, y, -phi, true, false),
-            (x, -y, -phi, false, true),
-            (-x, -y, phi, true, true),
+            (g, false, false),
+            (mirrored(-x, y, -phi, -sin), true, false),
+            (mirrored(x, -y, -phi, -sin), false, true),
+            (mirrored(-x, -y, phi, sin), true, true),
         ];
-        for (x, y, phi, flip, reflect) in cases {
-            if let Some((t, u, v)) = f(x, y, phi) {
+        for (g, flip, reflect) in cases {
+            if let Some((t, u, v)) = f(g) {
                 let sign = if flip { -1.0 } else { 1.0 };
                 let lengths = make(t, u, v).map(|l| sign * l);
                 let steers = if reflect { &reflected[..n] } else { steers };
@@ -339,15 +368,29 @@ impl Words {
 }
 
 /// L+ S+ L+ (8.1).
-fn lsl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (u, t) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+fn lsl(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (u, t) = polar(x - sin, y - 1.0 + cos);
     let v = wrap(phi - t);
     (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
 /// L+ S+ R+ (8.2).
-fn lsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (r, t1) = polar(x + phi.sin(), y - 1.0 - phi.cos());
+fn lsr(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (r, t1) = polar(x + sin, y - 1.0 - cos);
     if r * r < 4.0 {
         return None;
     }
@@ -358,8 +401,15 @@ fn lsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
 }
 
 /// L+ R- L (8.3, 8.4 read backwards).
-fn lrl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (r, theta) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+fn lrl(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (r, theta) = polar(x - sin, y - 1.0 + cos);
     if r > 4.0 {
         return None;
     }
@@ -381,8 +431,15 @@ fn tau_omega(u: f64, v: f64, xi: f64, eta: f64, phi: f64) -> (f64, f64) {
 }
 
 /// L+ Ru+ Lu- R- (8.7): the middle turns of equal length, opposite directions.
-fn lrlr_same(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+fn lrlr_same(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (xi, eta) = (x + sin, y - 1.0 - cos);
     let rho = 0.25 * (2.0 + xi.hypot(eta));
     if rho > 1.0 {
         return None;
@@ -393,8 +450,15 @@ fn lrlr_same(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
 }
 
 /// L+ Ru- Lu- R+ (8.8): the middle turns of equal length, both backwards.
-fn lrlr_opposite(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+fn lrlr_opposite(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (xi, eta) = (x + sin, y - 1.0 - cos);
     let rho = (20.0 - xi * xi - eta * eta) / 16.0;
     if !(0.0..=1.0).contains(&rho) {
         return None;
@@ -408,8 +472,15 @@ fn lrlr_opposite(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
 }
 
 /// L+ R-(π/2) S- L- (8.9).
-fn lrsl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (rho, theta) = polar(x - phi.sin(), y - 1.0 + phi.cos());
+fn lrsl(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (rho, theta) = polar(x - sin, y - 1.0 + cos);
     if rho < 2.0 {
         return None;
     }
@@ -421,8 +492,15 @@ fn lrsl(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
 }
 
 /// L+ R-(π/2) S- R- (8.10).
-fn lrsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+fn lrsr(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (xi, eta) = (x + sin, y - 1.0 - cos);
     let (rho, t) = polar(-eta, xi);
     if rho < 2.0 {
         return None;
@@ -433,8 +511,15 @@ fn lrsr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
 }
 
 /// L+ R-(π/2) S- L-(π/2) R+ (8.11).
-fn lrslr(x: f64, y: f64, phi: f64) -> Option<(f64, f64, f64)> {
-    let (xi, eta) = (x + phi.sin(), y - 1.0 - phi.cos());
+fn lrslr(g: Rel) -> Option<(f64, f64, f64)> {
+    let Rel {
+        x,
+        y,
+        phi,
+        sin,
+        cos,
+    } = g;
+    let (xi, eta) = (x + sin, y - 1.0 - cos);
     let rho = xi.hypot(eta);
     if rho < 2.0 {
         return None;
