@@ -215,7 +215,8 @@ impl Word {
 /// Formulas' solutions within this of their bounds still count (rounding).
 const ZERO: f64 = 1e-10;
 
-/// `a` wrapped into [-pi, pi].
+/// `a` wrapped into [-pi, pi], unchanged when already in it (the guidance's `wrap`
+/// shifts by pi and back, which rounds: the formulas' bounds at 0 would move).
 fn wrap(a: f64) -> f64 {
     let v = a % TAU;
     if v < -PI {
@@ -231,9 +232,10 @@ fn polar(x: f64, y: f64) -> (f64, f64) {
     (x.hypot(y), y.atan2(x))
 }
 
-/// The 48 words' solutions between two poses, as lengths, on the stack.
+/// The words' solutions between two poses (44 at most: 11 formulas in 4 symmetries),
+/// as lengths, on the stack.
 struct Words {
-    list: [Word; 48],
+    list: [Word; 44],
     n: usize,
 }
 
@@ -276,7 +278,7 @@ impl Words {
             ..ahead
         };
         let mut w = Words {
-            list: [Word::new(&[], &[]); 48],
+            list: [Word::new(&[], &[]); 44],
             n: 0,
         };
         let tuv: Make = |t, u, v| [t, u, v, 0.0, 0.0];
