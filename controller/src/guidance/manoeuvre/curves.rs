@@ -228,7 +228,8 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-fn polar(x: f64, y: f64) -> (f64, f64) {
+/// (x, y) as its length and angle.
+fn polar((x, y): (f64, f64)) -> (f64, f64) {
     (x.hypot(y), y.atan2(x))
 }
 
@@ -248,6 +249,19 @@ struct Rel {
     phi: f64,
     sin: f64,
     cos: f64,
+}
+
+impl Rel {
+    /// The goal's offsets from the centres of the turns at its end: (x - sin phi,
+    /// y - 1 + cos phi) for a left one, the formulas' (xi, eta).
+    fn left(self) -> (f64, f64) {
+        (self.x - self.sin, self.y - 1.0 + self.cos)
+    }
+
+    /// The same for a right turn: (x + sin phi, y - 1 - cos phi).
+    fn right(self) -> (f64, f64) {
+        (self.x + self.sin, self.y - 1.0 - self.cos)
+    }
 }
 
 /// A base formula: the goal in the start's frame to the word's free lengths (t, u, v),
@@ -371,53 +385,32 @@ impl Words {
 
 /// L+ S+ L+ (8.1).
 fn lsl(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (u, t) = polar(x - sin, y - 1.0 + cos);
-    let v = wrap(phi - t);
+    let (u, t) = polar(g.left());
+    let v = wrap(g.phi - t);
     (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
 /// L+ S+ R+ (8.2).
 fn lsr(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (r, t1) = polar(x + sin, y - 1.0 - cos);
+    let (r, t1) = polar(g.right());
     if r * r < 4.0 {
         return None;
     }
     let u = (r * r - 4.0).sqrt();
     let t = wrap(t1 + 2.0f64.atan2(u));
-    let v = wrap(t - phi);
+    let v = wrap(t - g.phi);
     (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
 /// L+ R- L (8.3, 8.4 read backwards).
 fn lrl(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (r, theta) = polar(x - sin, y - 1.0 + cos);
+    let (r, theta) = polar(g.left());
     if r > 4.0 {
         return None;
     }
     let u = -2.0 * (0.25 * r).asin();
     let t = wrap(theta + 0.5 * u + PI);
-    let v = wrap(phi - t + u);
+    let v = wrap(g.phi - t + u);
     (t >= -ZERO && u <= ZERO).then_some((t, u, v))
 }
 
@@ -434,33 +427,19 @@ fn tau_omega(u: f64, v: f64, xi: f64, eta: f64, phi: f64) -> (f64, f64) {
 
 /// L+ Ru+ Lu- R- (8.7): the middle turns of equal length, opposite directions.
 fn lrlr_same(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (xi, eta) = (x + sin, y - 1.0 - cos);
+    let (xi, eta) = g.right();
     let rho = 0.25 * (2.0 + xi.hypot(eta));
     if rho > 1.0 {
         return None;
     }
     let u = rho.acos();
-    let (t, v) = tau_omega(u, -u, xi, eta, phi);
+    let (t, v) = tau_omega(u, -u, xi, eta, g.phi);
     (t >= -ZERO && v <= ZERO).then_some((t, u, v))
 }
 
 /// L+ Ru- Lu- R+ (8.8): the middle turns of equal length, both backwards.
 fn lrlr_opposite(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (xi, eta) = (x + sin, y - 1.0 - cos);
+    let (xi, eta) = g.right();
     let rho = (20.0 - xi * xi - eta * eta) / 16.0;
     if !(0.0..=1.0).contains(&rho) {
         return None;
@@ -469,59 +448,38 @@ fn lrlr_opposite(g: Rel) -> Option<(f64, f64, f64)> {
     if u < -FRAC_PI_2 {
         return None;
     }
-    let (t, v) = tau_omega(u, u, xi, eta, phi);
+    let (t, v) = tau_omega(u, u, xi, eta, g.phi);
     (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
 /// L+ R-(π/2) S- L- (8.9).
 fn lrsl(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (rho, theta) = polar(x - sin, y - 1.0 + cos);
+    let (rho, theta) = polar(g.left());
     if rho < 2.0 {
         return None;
     }
     let r = (rho * rho - 4.0).sqrt();
     let u = 2.0 - r;
     let t = wrap(theta + r.atan2(-2.0));
-    let v = wrap(phi - FRAC_PI_2 - t);
+    let v = wrap(g.phi - FRAC_PI_2 - t);
     (t >= -ZERO && u <= ZERO && v <= ZERO).then_some((t, u, v))
 }
 
 /// L+ R-(π/2) S- R- (8.10).
 fn lrsr(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (xi, eta) = (x + sin, y - 1.0 - cos);
-    let (rho, t) = polar(-eta, xi);
+    let (xi, eta) = g.right();
+    let (rho, t) = polar((-eta, xi));
     if rho < 2.0 {
         return None;
     }
     let u = 2.0 - rho;
-    let v = wrap(t + FRAC_PI_2 - phi);
+    let v = wrap(t + FRAC_PI_2 - g.phi);
     (t >= -ZERO && u <= ZERO && v <= ZERO).then_some((t, u, v))
 }
 
 /// L+ R-(π/2) S- L-(π/2) R+ (8.11).
 fn lrslr(g: Rel) -> Option<(f64, f64, f64)> {
-    let Rel {
-        x,
-        y,
-        phi,
-        sin,
-        cos,
-    } = g;
-    let (xi, eta) = (x + sin, y - 1.0 - cos);
+    let (xi, eta) = g.right();
     let rho = xi.hypot(eta);
     if rho < 2.0 {
         return None;
@@ -531,7 +489,7 @@ fn lrslr(g: Rel) -> Option<(f64, f64, f64)> {
         return None;
     }
     let t = wrap(((4.0 - u) * xi - 2.0 * eta).atan2(-2.0 * xi + (u - 4.0) * eta));
-    let v = wrap(t - phi);
+    let v = wrap(t - g.phi);
     (t >= -ZERO && v >= -ZERO).then_some((t, u, v))
 }
 
