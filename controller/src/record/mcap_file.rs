@@ -15,6 +15,7 @@ use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, Sender, SyncSender};
 use std::thread::JoinHandle;
 
+use firmware_bridge::sync::lock;
 use foxglove::{ChannelId, FoxgloveError, Metadata, RawChannel, Sink, SinkId};
 
 /// The MCAP magic, at the start and the end of the file.
@@ -460,10 +461,6 @@ pub struct McapFile<W: Write + Send + 'static> {
     logging: Mutex<Option<Logging>>,
     writer: Mutex<Option<JoinHandle<std::io::Result<W>>>>,
     error: Mutex<Option<std::io::Error>>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 impl<W: Write + Send + 'static> McapFile<W> {
