@@ -1116,14 +1116,50 @@ enum Entry {
     Pose(f64, [f64; 3]),
 }
 
+impl Entry {
+    /// Its time, controller seconds.
+    fn time(&self) -> f64 {
+        match self {
+            Entry::Nmea(t, _)
+            | Entry::Laser(t, _)
+            | Entry::Can(t, _)
+            | Entry::Json(_, t, _)
+            | Entry::State(t, _)
+            | Entry::Plan(t, _)
+            | Entry::Fix(t, _)
+            | Entry::Pose(t, _) => *t,
+        }
+    }
+}
+
+/// Entries the loop's queue lost in a row: the first's and the last's times, and how
+/// many; marked in the file ([`topics::CONTROLLER_DROPPED`]) once the queue takes an
+/// entry again, so a replay knows where the recording stops being whole.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Gap {
+    from: f64,
+    to: f64,
+    entries: u64,
+}
+
+impl Gap {
+    fn mark(self) -> Entry {
+        Entry::Json(
+            topics::CONTROLLER_DROPPED,
+            self.to,
+            json!({ "from": self.from, "entries": self.entries }),
+        )
+    }
+}
+
 /// Entries queued for the [`BackgroundWriter`]'s thread before the loop drops them
 /// (some seconds of a run: a tick hands over a handful).
 const QUEUE: usize = 8192;
 
 /// A [`Writer`] on a thread of its own, for the controller's loop: the loop hands it
 /// owned copies of what crossed its ports and never waits (a full queue drops the
-/// entry and counts it), and the thread encodes and writes them. Dropped, it finishes
-/// the recording.
+/// entry, counts it and marks the gap in the file: [`Gap`]), and the thread encodes
+/// and writes them. Dropped, it finishes the recording.
 #[derive(Debug)]
 pub struct BackgroundWriter {
     queue: Option<std::sync::mpsc::SyncSender<Entry>>,
@@ -1132,6 +1168,8 @@ pub struct BackgroundWriter {
     /// When the controller's pose estimate is next due ([`POSE_PERIOD`]).
     next_pose: f64,
     dropped: u64,
+    /// Entries lost since the queue last took one.
+    gap: Option<Gap>,
 }
 
 impl BackgroundWriter {
@@ -1157,15 +1195,32 @@ impl BackgroundWriter {
             cadence: StateCadence::default(),
             next_pose: 0.0,
             dropped: 0,
+            gap: None,
         })
     }
 
+    /// `entry` onto the queue, after the mark of the gap before it if there is one; a
+    /// full queue loses it (and the mark, which waits for the next).
     fn send(&mut self, entry: Entry) {
-        if let Some(q) = &self.queue
-            && q.try_send(entry).is_err()
-        {
-            self.dropped += 1;
+        let Some(q) = &self.queue else {
+            return;
+        };
+        let t = entry.time();
+        let marked = self.gap.is_none_or(|gap| q.try_send(gap.mark()).is_ok());
+        if marked {
+            self.gap = None;
+            if q.try_send(entry).is_ok() {
+                return;
+            }
         }
+        self.dropped += 1;
+        let gap = self.gap.get_or_insert(Gap {
+            from: t,
+            to: t,
+            entries: 0,
+        });
+        gap.to = t;
+        gap.entries += 1;
     }
 
     /// See [`Writer::nmea`].
@@ -1220,7 +1275,12 @@ impl BackgroundWriter {
     }
 
     fn close(&mut self) -> Option<RecordSummary> {
-        self.queue = None;
+        // A gap at the end is marked too: the thread writes what is queued, then it.
+        let queue = self.queue.take();
+        if let (Some(q), Some(gap)) = (&queue, self.gap.take()) {
+            let _ = q.send(gap.mark());
+        }
+        drop(queue);
         let mut summary = self.thread.take()?.join().ok().flatten()?;
         if self.dropped > 0 {
             summary.error.get_or_insert(format!(
@@ -1281,6 +1341,62 @@ mod tests {
             let theirs = serde_json::to_string(&v).unwrap();
             assert_eq!(String::from_utf8(ours).unwrap(), theirs, "{v}");
         }
+    }
+
+    /// A writer whose queue holds `n` entries, and the queue's other end (no thread).
+    fn held_queue(n: usize) -> (BackgroundWriter, std::sync::mpsc::Receiver<Entry>) {
+        let (queue, entries) = std::sync::mpsc::sync_channel(n);
+        let w = BackgroundWriter {
+            queue: Some(queue),
+            thread: None,
+            cadence: StateCadence::default(),
+            next_pose: 0.0,
+            dropped: 0,
+            gap: None,
+        };
+        (w, entries)
+    }
+
+    /// The times of the entries queued, and the gaps marked among them.
+    fn drained(entries: &std::sync::mpsc::Receiver<Entry>) -> (Vec<f64>, Vec<serde_json::Value>) {
+        let (mut times, mut marks) = (Vec::new(), Vec::new());
+        for e in entries.try_iter() {
+            match e {
+                Entry::Json(topics::CONTROLLER_DROPPED, t, v) => marks.push(json!([t, v])),
+                e => times.push(e.time()),
+            }
+        }
+        (times, marks)
+    }
+
+    #[test]
+    fn a_full_queue_loses_entries_and_the_file_marks_the_gap_before_the_next() {
+        let (mut w, entries) = held_queue(3);
+        let log = |w: &mut BackgroundWriter, t: f64| {
+            w.log_other(topics::CONTROLLER_STOP, t, json!({}));
+        };
+        // 0-2 s taken, 3-6 s lost.
+        (0..7).for_each(|k| log(&mut w, f64::from(k)));
+        assert_eq!(drained(&entries), (vec![0.0, 1.0, 2.0], vec![]));
+        // The queue has room: the gap's mark, then the entry.
+        log(&mut w, 7.0);
+        let gap = json!([6.0, { "from": 3.0, "entries": 4 }]);
+        assert_eq!(drained(&entries), (vec![7.0], vec![gap]));
+        // 8-10 s taken, 11 s lost; the queue still full, the mark does not fit before
+        // 11.5 s: it is lost too, and the gap grows.
+        (8..12).for_each(|k| log(&mut w, f64::from(k)));
+        log(&mut w, 11.5);
+        assert_eq!(drained(&entries), (vec![8.0, 9.0, 10.0], vec![]));
+        log(&mut w, 12.0);
+        let gap = json!([11.5, { "from": 11.0, "entries": 2 }]);
+        assert_eq!(drained(&entries), (vec![12.0], vec![gap]));
+        assert_eq!(w.dropped, 6);
+        // A gap at the end is marked when the writer closes.
+        (13..17).for_each(|k| log(&mut w, f64::from(k)));
+        assert_eq!(drained(&entries).0, [13.0, 14.0, 15.0]);
+        assert!(w.close().is_none(), "no thread, no summary");
+        let gap = json!([16.0, { "from": 16.0, "entries": 1 }]);
+        assert_eq!(drained(&entries), (vec![], vec![gap]));
     }
 
     /// A scan of `n` beams with ranges, a dropout and no return among them.

@@ -37,6 +37,11 @@ pub const CONTROLLER_PLANNING: &str = "/controller/planning";
 /// JSON `{"ticks": n}`: the controller's loop came late and skipped n ticks from this
 /// one on (the controller's own recording).
 pub const CONTROLLER_SKIPPED: &str = "/controller/skipped";
+/// JSON `{"from": t, "entries": n}`: the recorder's queue was full and lost n entries,
+/// the first at controller second t, the last at this message's time (the controller's
+/// own recording): the recording is whole only before t, and a replay compares up to
+/// there.
+pub const CONTROLLER_DROPPED: &str = "/controller/dropped";
 /// JSON `{"requested": true}`: the controller was asked to stop (a signal) at this
 /// tick (the controller's own recording).
 pub const CONTROLLER_STOP: &str = "/controller/stop";

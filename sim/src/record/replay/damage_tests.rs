@@ -7,6 +7,8 @@ use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::sync::OnceLock;
 
+use serde_json::json;
+
 use ugv_controller::config::FollowerKind;
 
 use super::scan::{Scanned, scan};
@@ -107,6 +109,18 @@ fn rewrite(
     options: mcap::WriteOptions,
     channel: impl Fn(&mcap::records::Channel) -> Option<BTreeMap<String, String>>,
 ) -> Vec<u8> {
+    rewrite_with(bytes, options, channel, |_| true, None)
+}
+
+/// [`rewrite`], keeping the messages whose log times `keep` keeps, and `extra` (a
+/// JSON message: its topic, log time and text) among them in log-time order.
+fn rewrite_with(
+    bytes: &[u8],
+    options: mcap::WriteOptions,
+    channel: impl Fn(&mcap::records::Channel) -> Option<BTreeMap<String, String>>,
+    keep: impl Fn(u64) -> bool,
+    extra: Option<(&str, u64, String)>,
+) -> Vec<u8> {
     let file = scan(bytes).unwrap();
     let mut w = options.create(Cursor::new(Vec::new())).unwrap();
     w.write_metadata(&mcap::records::Metadata {
@@ -133,15 +147,27 @@ fn rewrite(
             ids.insert(c.id, id);
         }
     }
+    let mut extra = extra.map(|(topic, log_time, text)| {
+        let id = w.add_channel(0, topic, "json", &BTreeMap::new()).unwrap();
+        (id, log_time, text)
+    });
+    let mut write = |channel_id, sequence, log_time, data: &[u8]| {
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time,
+            publish_time: log_time,
+        };
+        w.write_to_known_channel(&header, data).unwrap();
+    };
     for (sequence, m) in file.messages.iter().enumerate() {
-        if let Some(&channel_id) = ids.get(&m.channel) {
-            let header = mcap::records::MessageHeader {
-                channel_id,
-                sequence: sequence as u32,
-                log_time: m.log_time,
-                publish_time: m.log_time,
-            };
-            w.write_to_known_channel(&header, &m.data).unwrap();
+        if let Some((id, log_time, text)) = extra.take_if(|e| e.1 < m.log_time) {
+            write(id, u32::MAX, log_time, text.as_bytes());
+        }
+        if let Some(&channel_id) = ids.get(&m.channel)
+            && keep(m.log_time)
+        {
+            write(channel_id, sequence as u32, m.log_time, &m.data);
         }
     }
     w.finish().unwrap();
@@ -415,6 +441,46 @@ fn a_cut_controller_recording_replays_up_to_the_cut_as_recorded() {
         "the controller's own: {replayed} cuts replay as recorded; compared to the end of the file, {diverged} diverged"
     );
     assert!(replayed >= 22, "{replayed}");
+}
+
+/// The controller's own recording with everything from 3.0 s to 3.5 s lost, as its
+/// recorder loses entries when its queue is full; with the mark the recorder then
+/// writes, or without.
+fn with_loss(marked: bool) -> Vec<u8> {
+    let bytes = controller_recording();
+    let epoch = read(bytes).unwrap().info.epoch_unix_ns;
+    let (from, to) = (epoch + 3_000_000_000, epoch + 3_500_000_000);
+    let mark = json!({ "from": 3.0, "entries": 250 }).to_string();
+    let extra = marked.then_some((topics::CONTROLLER_DROPPED, to - 10_000_000, mark));
+    rewrite_with(bytes, no_crcs(), same, |t| !(from..to).contains(&t), extra)
+}
+
+#[test]
+fn entries_the_controllers_recorder_lost_are_said_and_the_replay_compares_up_to_them() {
+    let rec = read(&with_loss(true)).unwrap();
+    let why = rec.truncated.clone().unwrap();
+    assert!(why.contains("lost 250 entries from 3.000 s"), "{why}");
+    assert_eq!(
+        rec.whole_until_ns,
+        Some(rec.info.epoch_unix_ns + 3_000_000_000)
+    );
+    let report = replay(&rec, Tolerance::for_mode(rec.info.mode), None).unwrap();
+    assert_eq!(report.divergence, None, "{report:#?}");
+    assert!(
+        report.compared_until_s.is_some_and(|t| t <= 3.0),
+        "{report:?}"
+    );
+    assert!(report.replayed_s < 3.0, "{report:?}");
+    let beats = &report.messages["CONTROLLER_HEARTBEAT"];
+    assert!(
+        beats.matched > 100 && beats.matched == beats.recorded,
+        "{beats:?}"
+    );
+    // Unmarked, the same loss is taken for the controller's doing.
+    let rec = read(&with_loss(false)).unwrap();
+    assert_eq!((rec.truncated.as_ref(), rec.whole_until_ns), (None, None));
+    let report = replay(&rec, Tolerance::for_mode(rec.info.mode), None).unwrap();
+    assert!(report.divergence.is_some(), "{report:#?}");
 }
 
 /// Written in 16 KiB chunks.

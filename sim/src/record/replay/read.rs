@@ -148,12 +148,12 @@ pub struct Recorded {
     pub config: ControllerConfig,
     pub(super) inputs: Vec<(u64, Input)>,
     pub(super) commands: Vec<Command>,
-    /// Where and why reading stopped before the file's end (a recording cut off by a
-    /// kill).
+    /// Where and why the recording stops being whole before the file's end: cut off by
+    /// a kill, or entries its recorder lost ([`topics::CONTROLLER_DROPPED`]).
     pub truncated: Option<String>,
-    /// A recording cut off by a kill: every input and command before this instant (ns
-    /// on the log time) is in the file, some at or after it may be lost with the cut.
-    /// See [`whole_until`].
+    /// A recording cut off by a kill, or whose recorder lost entries: every input and
+    /// command before this instant (ns on the log time) is in the file, some at or
+    /// after it may be lost. See [`whole_until`].
     pub whole_until_ns: Option<u64>,
     /// Frames the replay cannot inject (extended IDs: not on this bus).
     pub skipped: u64,
@@ -234,19 +234,30 @@ impl Recorded {
         for (index, m) in file.messages.iter().enumerate() {
             decoder.take(index, m)?;
         }
-        let whole_until_ns = file
-            .cut
-            .as_ref()
-            .map(|_| whole_until(&file, decoder.latest_remapped));
-        let truncated = file.cut.as_ref().map(|c| {
-            format!(
+        let cut = file.cut.as_ref().map(|c| {
+            let why = format!(
                 "cut at byte {} of {}, after {} whole chunks: {}",
                 c.offset,
                 file.len,
                 file.chunks.len(),
                 c.why
-            )
+            );
+            (whole_until(&file, decoder.latest_remapped), why)
         });
+        let lost = decoder.dropped.map(|(from, n)| {
+            let why = format!(
+                "the controller's recorder lost {n} entries from {:.3} s on (its queue was full)",
+                decoder.seconds(from)
+            );
+            (from, why)
+        });
+        // Whole up to the earlier of a cut and a loss; both said.
+        let whole_until_ns = cut.iter().chain(&lost).map(|(ns, _)| *ns).min();
+        let truncated = cut
+            .into_iter()
+            .chain(lost)
+            .map(|(_, why)| why)
+            .reduce(|a, b| format!("{a}; {b}"));
         let mut d = decoder;
         // In log-time order (HIL's CAN frames carry the kernel's receive times, the
         // rest the simulator's): the replay delivers each at the first tick after it.
@@ -452,6 +463,9 @@ struct Decoder<'a> {
     plans_taken_at: Vec<f64>,
     ticks_skipped: Vec<(u64, u64)>,
     stop_requested: Option<f64>,
+    /// The controller's own recording: the first entry its recorder lost (ns on the
+    /// log time), and how many it lost in all.
+    dropped: Option<(u64, u64)>,
 }
 
 /// HIL: a CAN frame's log time is the tick that read it, its kernel receive time
@@ -495,12 +509,18 @@ impl<'a> Decoder<'a> {
             plans_taken_at: Vec::new(),
             ticks_skipped: Vec::new(),
             stop_requested: None,
+            dropped: None,
         })
     }
 
     /// Controller seconds of log time `ns`.
     fn seconds(&self, ns: u64) -> f64 {
         (i128::from(ns) - i128::from(self.epoch_ns)) as f64 * 1e-9
+    }
+
+    /// Controller seconds `s` as ns on the log time, as the writer puts them there.
+    fn ns(&self, s: f64) -> u64 {
+        self.epoch_ns + (s.max(0.0) * 1e9).round() as u64
     }
 
     /// Message `index` of the file.
@@ -555,6 +575,16 @@ impl<'a> Decoder<'a> {
                     .ok_or_else(|| bad("no numeric \"ticks\"".to_owned()))?;
                 let first = (self.seconds(ns) / COMMAND_PERIOD).round().max(0.0) as u64;
                 self.ticks_skipped.push((first, n));
+            }
+            topics::CONTROLLER_DROPPED => {
+                let v = json()?;
+                let (Some(from), Some(n)) = (v["from"].as_f64(), v["entries"].as_u64()) else {
+                    return Err(bad("no numeric \"from\" and \"entries\"".to_owned()));
+                };
+                let from_ns = self.ns(from).min(ns);
+                let (first, lost) = self.dropped.get_or_insert((from_ns, 0));
+                *first = (*first).min(from_ns);
+                *lost += n;
             }
             _ => {}
         }
