@@ -745,7 +745,10 @@ impl Writer {
         let ns = self.ns(t);
         for &b in bytes {
             self.nmea_line.push(b);
-            if b != b'\n' && self.nmea_line.len() < MAX_LINE {
+            // A line ends at its first terminator, as the reader ends it (a read that
+            // stops between its CR and LF, in a backlog, gave the reader the line a
+            // tick before its LF came); the LF after a CR ends an empty line.
+            if !matches!(b, b'\r' | b'\n') && self.nmea_line.len() < MAX_LINE {
                 continue;
             }
             let line = std::mem::take(&mut self.nmea_line);
@@ -1341,6 +1344,54 @@ mod tests {
             let theirs = serde_json::to_string(&v).unwrap();
             assert_eq!(String::from_utf8(ours).unwrap(), theirs, "{v}");
         }
+    }
+
+    #[test]
+    fn an_nmea_line_is_logged_at_the_tick_that_read_its_first_terminator_as_the_reader_ends_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let info = RunInfo::field(
+            "lines".to_owned(),
+            1_000_000_000,
+            "mem".to_owned(),
+            firmware_bridge::nmea::ReaderConfig::default().complete_when,
+            115_200,
+            &crate::config::ControllerConfig::default(),
+        )
+        .unwrap();
+        let mut w = Writer::create(Some(dir.path()), foxglove::Context::new(), info).unwrap();
+        // Reads that end between a CR and its LF, in a line, and after an LF.
+        let reads: [&[u8]; 4] = [
+            b"$GPZDA,1*00\r",
+            b"\n$GPZDA,2",
+            b"*00\r\n$GPZDA,3*00\r\n",
+            b"$X",
+        ];
+        for (k, bytes) in reads.iter().enumerate() {
+            w.nmea(k as f64 * 0.01, bytes);
+        }
+        w.finish();
+        let bytes = std::fs::read(dir.path().join(MCAP_FILE)).unwrap();
+        let lines: Vec<(u64, String)> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .filter(|m| m.channel.topic == topics::NMEA)
+            .map(|m| {
+                let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+                (
+                    m.log_time - 1_000_000_000,
+                    v["sentence"].as_str().unwrap().to_owned(),
+                )
+            })
+            .collect();
+        let line = |ms: u64, s: &str| (ms * 1_000_000, s.to_owned());
+        assert_eq!(
+            lines,
+            [
+                line(0, "$GPZDA,1*00"),
+                line(20, "$GPZDA,2*00"),
+                line(20, "$GPZDA,3*00")
+            ]
+        );
     }
 
     /// A writer whose queue holds `n` entries, and the queue's other end (no thread).
