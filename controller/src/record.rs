@@ -42,7 +42,7 @@ use std::time::{Duration, Instant, SystemTime};
 use firmware_bridge::can::TapFrame;
 use firmware_bridge::clock::unix_ns;
 use firmware_bridge::laser::LaserFrame;
-use firmware_bridge::nmea::{Accuracy, GpsFix, GpsReading};
+use firmware_bridge::nmea::{Accuracy, GpsFix, GpsReading, is_terminator};
 use foxglove::schemas::{
     Color, FrameTransform, LaserScan, LinePrimitive, LocationFix, Point3, Quaternion, SceneEntity,
     SceneUpdate, Timestamp, Vector3,
@@ -697,9 +697,9 @@ impl Writer {
         self.summary.error.get_or_insert(error);
     }
 
-    /// Log time of the run's time `t`, ns since 1970.
+    /// Log time of the run's time `t`, ns since 1970 ([`log_ns`]).
     pub fn ns(&self, t: f64) -> u64 {
-        self.info.epoch_unix_ns + (t.max(0.0) * 1e9).round() as u64
+        log_ns(self.info.epoch_unix_ns, t)
     }
 
     /// The wall clock alongside the run's time (HIL only: SIL has none, and the
@@ -745,10 +745,9 @@ impl Writer {
         let ns = self.ns(t);
         for &b in bytes {
             self.nmea_line.push(b);
-            // A line ends at its first terminator, as the reader ends it (a read that
-            // stops between its CR and LF, in a backlog, gave the reader the line a
-            // tick before its LF came); the LF after a CR ends an empty line.
-            if !matches!(b, b'\r' | b'\n') && self.nmea_line.len() < MAX_LINE {
+            // A line ends where the reader ends it (a read that stops between its CR
+            // and LF, in a backlog, gave the reader the line a tick before its LF).
+            if !is_terminator(b) && self.nmea_line.len() < MAX_LINE {
                 continue;
             }
             let line = std::mem::take(&mut self.nmea_line);
@@ -1105,6 +1104,12 @@ impl StateCadence {
         self.plans_seen = plans.len();
         (state, new)
     }
+}
+
+/// Log time, ns since 1970, of the run's time `t` (seconds) for a run that began at
+/// `epoch_unix_ns`: what every message of a recording is logged at.
+pub fn log_ns(epoch_unix_ns: u64, t: f64) -> u64 {
+    epoch_unix_ns + (t.max(0.0) * 1e9).round() as u64
 }
 
 /// What the controller's loop hands its [`BackgroundWriter`].

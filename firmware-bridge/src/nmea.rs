@@ -75,7 +75,7 @@ mod writer;
 use std::io;
 use std::path::PathBuf;
 
-pub use framing::{Framed, LineFramer, MAX_SENTENCE_LEN, checksum};
+pub use framing::{Framed, LineFramer, MAX_SENTENCE_LEN, checksum, is_terminator};
 pub use line::{BytePort, LineEndpoint};
 pub use link::NmeaLink;
 pub use pty::{Pty, PtyEndpoint};

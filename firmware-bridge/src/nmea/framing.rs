@@ -9,6 +9,12 @@ use super::SentenceError;
 /// receivers with 7-decimal minutes do, like this crate's writer.
 pub const MAX_SENTENCE_LEN: usize = 82 + 20;
 
+/// Whether `b` ends a line: a sentence ends at its first CR or LF (the LF after a CR
+/// ends an empty line).
+pub fn is_terminator(b: u8) -> bool {
+    b == b'\r' || b == b'\n'
+}
+
 /// The NMEA checksum: XOR of the bytes between `$` and `*`.
 pub fn checksum(body: &[u8]) -> u8 {
     body.iter().fold(0, |c, b| c ^ b)
@@ -88,7 +94,7 @@ impl LineFramer {
     }
 
     fn push_byte(&mut self, b: u8, out: &mut Vec<Framed>) {
-        let terminator = b == b'\r' || b == b'\n';
+        let terminator = is_terminator(b);
         match self.state {
             State::Idle => {
                 if b == b'$' {

@@ -64,9 +64,8 @@ pub struct ReplayReport {
     /// Simulated seconds replayed, from the controller's start.
     pub replayed_s: f64,
     /// A recording cut by a kill or whose recorder lost entries: its commands were
-    /// compared before this instant,
-    /// simulated seconds (the last one its inputs and commands are whole before, less
-    /// the tolerance's window); none when the file is whole.
+    /// compared before this instant, simulated seconds (the last one its inputs and
+    /// commands are whole before, less the tolerance's window); none when it is whole.
     pub compared_until_s: Option<f64>,
     pub inputs: u64,
     pub divergence: Option<Divergence>,

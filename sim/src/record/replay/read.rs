@@ -520,7 +520,7 @@ impl<'a> Decoder<'a> {
 
     /// Controller seconds `s` as ns on the log time, as the writer puts them there.
     fn ns(&self, s: f64) -> u64 {
-        self.epoch_ns + (s.max(0.0) * 1e9).round() as u64
+        ugv_controller::record::log_ns(self.epoch_ns, s)
     }
 
     /// Message `index` of the file.
