@@ -41,6 +41,19 @@ host_nice=${2:--10}
 hog=${3:-1}
 host_rt=${4:-10}
 export UGV_BIN_DIR=${UGV_BIN_DIR:-$PWD/target/release}
+# What the group needs from the host, checked before a series of hours: a missing piece
+# would fail the same tests in every run.
+missing=()
+for bin in ugv-sim ugv-controller; do
+    [ -x "$UGV_BIN_DIR/$bin" ] || missing+=("$UGV_BIN_DIR/$bin (cargo build --workspace --release)")
+done
+[ -x target/debug/vcan-setup ] || missing+=("target/debug/vcan-setup (cargo nextest run --workspace --locked --no-run)")
+[ -x examples/python/.venv/bin/python ] ||
+    missing+=("examples/python/.venv, the Python example's venv (bash scripts/install-deps.sh)")
+if [ ${#missing[@]} -gt 0 ]; then
+    printf 'vcan-load-check: missing %s\n' "${missing[@]}" >&2
+    exit 2
+fi
 rm -rf "$out"
 mkdir -p "$out"
 if [ "$hog" != 0 ]; then
