@@ -261,6 +261,46 @@ fn range_noise_has_zero_mean_and_the_configured_sigma_for_a_fixed_seed() {
         (within - 0.6827).abs() < 5.0 * (0.6827f64 * 0.3173 / n).sqrt(),
         "{within}"
     );
+    // Neighbouring beams (each a stream of its own) uncorrelated: the lag-1
+    // correlation's standard error is 1 / sqrt(n).
+    let lag1 = residuals
+        .windows(2)
+        .map(|w| (w[0] - mean) * (w[1] - mean))
+        .sum::<f64>()
+        / ((n - 1.0) * sd * sd);
+    assert!(lag1.abs() < 5.0 / n.sqrt(), "lag-1 correlation {lag1}");
+}
+
+#[test]
+fn a_beams_noise_is_the_same_whatever_the_other_beams_hit() {
+    let mut s = room();
+    s.laser.dropout_probability = 0.05;
+    let mut cluttered = s.clone();
+    // A post 3 m ahead hides some of the wall from the second device.
+    cluttered.obstacles.push(Obstacle::Circle {
+        x: 5.0,
+        y: 0.5,
+        radius: 0.3,
+        motion: None,
+    });
+    let (bare, post) = (World::new(&s.obstacles), World::new(&cluttered.obstacles));
+    let (mut a, mut b) = (device!(&s), device!(&cluttered));
+    let (mut same, mut hidden) = (0, 0);
+    for k in 0..3 {
+        let fa = a.scan(&bare, 0.0, -1.0, 0.5, 0.1 * f64::from(k));
+        let fb = b.scan(&post, 0.0, -1.0, 0.5, 0.1 * f64::from(k));
+        for (ra, rb) in fa.ranges().iter().zip(fb.ranges()) {
+            if ra.to_bits() == rb.to_bits() {
+                same += 1;
+            } else {
+                // Only the beams the post stops change, and they come out shorter.
+                assert!(rb < ra || rb.is_nan() || ra.is_nan(), "{ra} -> {rb}");
+                hidden += 1;
+            }
+        }
+    }
+    assert!(hidden > 0, "the post hid nothing");
+    assert!(same > 10 * hidden, "{same} beams alike, {hidden} changed");
 }
 
 fn bits_equal(a: &LaserFrame, b: &LaserFrame) -> bool {

@@ -30,11 +30,13 @@
 //!
 //! # Determinism
 //!
-//! The noise stream is xoshiro256++ ([`noise`]) seeded from the scenario's `sim.seed`
-//! mixed with [`NOISE_SOURCE`], so it differs from other devices' streams and is
-//! identical for the same seed. Every beam draws the same numbers whatever it hits (a
-//! normal, and a uniform for the dropout when `dropout_probability` is above 0), so the
-//! stream stays aligned across scans and scenes.
+//! The noise seed is the scenario's `sim.seed` mixed with [`NOISE_SOURCE`], so it
+//! differs from other devices' seeds and is the same for the same `sim.seed`. Each beam
+//! of each scan draws from a stream of its own ([`noise`]), keyed by the seed, the
+//! scan's sequence number and the beam: a normal, and a uniform for the dropout when
+//! `dropout_probability` is above 0. A beam's noise is therefore the same whatever the
+//! other beams hit (an obstacle added to a scene leaves the other beams' ranges as
+//! they were), and beams without a return draw nothing.
 //!
 //! # Ray casting
 //!
@@ -96,7 +98,8 @@ pub struct LaserDevice {
     spec: LaserSpec,
     /// Intensity of a return from obstacle `i` of the scenario.
     intensity: Vec<f32>,
-    rng: noise::Noise,
+    /// The seed every beam's noise stream is keyed by ([`noise::BeamNoise`]).
+    noise_seed: u64,
     epoch_ns: u64,
     sequence: u64,
     /// The beams' directions relative to the forward axis.
@@ -134,7 +137,7 @@ impl LaserDevice {
             config: config.clone(),
             spec,
             intensity,
-            rng: noise::Noise::new(noise_seed(sim_seed)),
+            noise_seed: noise_seed(sim_seed),
             epoch_ns,
             sequence: 0,
             fan,
@@ -192,12 +195,13 @@ impl LaserDevice {
         let mut hits = std::mem::take(&mut self.hits);
         world.scan(pose, &self.fan, self.spec.range_max, &mut hits);
         let n = hits.len();
-        for ((hit, range), intensity) in hits
+        for (beam, ((hit, range), intensity)) in hits
             .iter()
             .zip(&mut frame.ranges)
             .zip(&mut frame.intensities)
+            .enumerate()
         {
-            (*range, *intensity) = self.measure(*hit);
+            (*range, *intensity) = self.measure(*hit, beam);
         }
         self.hits = hits;
         zero_tail(&mut frame.ranges[n..]);
@@ -220,17 +224,17 @@ impl LaserDevice {
         frame.range_max = s.range_max as f32;
     }
 
-    /// One beam's range and intensity from its true hit: noise, dropout, limits.
-    fn measure(&mut self, (r, obstacle): Hit) -> (f32, f32) {
+    /// Beam `beam`'s range and intensity from its true hit: noise, dropout, limits.
+    fn measure(&self, (r, obstacle): Hit, beam: usize) -> (f32, f32) {
         let s = &self.spec;
-        let p_drop = self.config.dropout_probability;
-        // The same draws per beam, whatever it hits.
-        let noise: f64 = self.rng.sample(StandardNormal);
-        let dropped = p_drop > 0.0 && self.rng.random::<f64>() < p_drop;
         if !(r >= s.range_min && r <= s.range_max) {
             // Nothing within range_max, or closer than range_min: no return.
-            (f32::INFINITY, 0.0)
-        } else if dropped {
+            return (f32::INFINITY, 0.0);
+        }
+        let mut rng = noise::BeamNoise::new(self.noise_seed, self.sequence, beam);
+        let noise: f64 = rng.sample(StandardNormal);
+        let p_drop = self.config.dropout_probability;
+        if p_drop > 0.0 && rng.random::<f64>() < p_drop {
             (f32::NAN, 0.0)
         } else {
             let measured = (r + noise * s.range_noise_sigma).clamp(s.range_min, s.range_max);
