@@ -22,6 +22,11 @@ pub struct CircleFit {
 /// Largest radius a circle fit returns: beyond it the points are collinear.
 const MAX_RADIUS: f64 = 1e4;
 const MAX_ITERATIONS: usize = 50;
+/// The fit has converged once a step moves the circle less than this many metres
+/// (times 1 + the radius): a tenth of a micrometre, five orders below a laser's range
+/// noise. Taubin's start lies within a fraction of a millimetre; the steps after this
+/// one would only polish the last digits (and end in a run of rejected trials).
+const STEP_TOLERANCE: f64 = 1e-7;
 
 /// Fits a circle: Taubin's algebraic fit (Chernov's Newton iteration on its
 /// characteristic polynomial) as the start, then Levenberg-Marquardt on the geometric
@@ -73,7 +78,7 @@ pub fn fit_circle(points: &[[f64; 2]], noise_sigma: f64) -> Option<CircleFit> {
             }
             lambda *= 10.0;
         }
-        if !accepted || step_norm <= 1e-10 * (1.0 + r.abs()) {
+        if !accepted || step_norm <= STEP_TOLERANCE * (1.0 + r.abs()) {
             break;
         }
     }
