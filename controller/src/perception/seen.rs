@@ -61,9 +61,8 @@ fn cell(x: f64, y: f64) -> (i64, i64) {
 /// `length` metres, in order (Amanatides and Woo's traversal: one step per cell, no
 /// rounding per point), each yielded as the ray reaches it, so that the cells are
 /// marked as they come rather than gathered first.
-fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64) -> impl Iterator<Item = (i64, i64)> {
-    let (mut i, mut j) = cell(x, y);
-    let last = cell(x + length * c, y + length * s);
+fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64) -> Traversal {
+    let (i, j) = cell(x, y);
     let axis = |p: f64, d: f64, k: i64| {
         if d.abs() < 1e-12 {
             return (0, f64::INFINITY, f64::INFINITY);
@@ -72,27 +71,53 @@ fn traverse(x: f64, y: f64, c: f64, s: f64, length: f64) -> impl Iterator<Item =
         let edge = (k + i64::from(d > 0.0)) as f64 * CELL;
         (step, (edge - p) / d, CELL / d.abs())
     };
-    let (si, mut ti, di) = axis(x, c, i);
-    let (sj, mut tj, dj) = axis(y, s, j);
-    // A ray crosses at most this many cells (the guard against rounding at the end).
-    let bound = ((length / CELL) * 2.0).ceil() as usize + 2;
-    let mut arrived = false;
-    (0..bound).map_while(move |_| {
-        if arrived {
+    let (si, ti, di) = axis(x, c, i);
+    let (sj, tj, dj) = axis(y, s, j);
+    Traversal {
+        here: (i, j),
+        last: cell(x + length * c, y + length * s),
+        step: (si, sj),
+        next_edge: (ti, tj),
+        per_cell: (di, dj),
+        // A ray crosses at most this many cells (the guard against rounding at the end).
+        left: ((length / CELL) * 2.0).ceil() as usize + 2,
+    }
+}
+
+/// A ray's walk through the cells ([`traverse`]).
+struct Traversal {
+    here: (i64, i64),
+    last: (i64, i64),
+    /// The cell steps along x and y (-1, 0 or 1).
+    step: (i64, i64),
+    /// The ray's length at the next cell edge across x and across y.
+    next_edge: (f64, f64),
+    /// The ray's length across one cell along x and along y.
+    per_cell: (f64, f64),
+    /// The cells it may yet yield.
+    left: usize,
+}
+
+impl Iterator for Traversal {
+    type Item = (i64, i64);
+
+    fn next(&mut self) -> Option<(i64, i64)> {
+        if self.left == 0 {
             return None;
         }
-        let here = (i, j);
-        if here == last {
-            arrived = true;
-        } else if ti < tj {
-            ti += di;
-            i += si;
+        self.left -= 1;
+        let here = self.here;
+        if here == self.last {
+            self.left = 0;
+        } else if self.next_edge.0 < self.next_edge.1 {
+            self.next_edge.0 += self.per_cell.0;
+            self.here.0 += self.step.0;
         } else {
-            tj += dj;
-            j += sj;
+            self.next_edge.1 += self.per_cell.1;
+            self.here.1 += self.step.1;
         }
         Some(here)
-    })
+    }
 }
 
 type Chunks = CellMap<[u32; CHUNK as usize]>;
@@ -122,19 +147,25 @@ impl SeenSpace {
     /// Cells seen free, in the order of a ray or a row (neighbours mostly share a
     /// chunk, looked up once for them): no obstacle remembered there either.
     fn mark_cells(&mut self, cells: impl IntoIterator<Item = (i64, i64)>) {
-        let mut cells = cells.into_iter().peekable();
-        while let Some(&first) = cells.peek() {
+        let mut cells = cells.into_iter();
+        let mut next = cells.next();
+        while let Some(first) = next {
             let key = chunk_of(first);
             let seen = self.chunks.entry(key).or_insert([0; CHUNK as usize]);
             let mut hits = self.hits.get_mut(&key);
             // One pass over the run of cells in this chunk.
-            while let Some(c) = cells.next_if(|&c| chunk_of(c) == key) {
+            let mut c = first;
+            next = loop {
                 let (u, v) = within(c);
                 seen[v] |= 1 << u;
                 if let Some(h) = hits.as_deref_mut() {
                     h[v][u] = h[v][u].saturating_sub(PASS_LOSS);
                 }
-            }
+                match cells.next() {
+                    Some(n) if chunk_of(n) == key => c = n,
+                    other => break other,
+                }
+            };
         }
     }
 
