@@ -364,15 +364,18 @@ const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
 /// [`STILL_SPEED`] leaves its surface: crossing, its leading side stands where the
 /// beams passed; coming or going, most of its hits are off the earlier surface.
 ///
+/// A cluster of more than [`STILL_SAMPLES`] hits is judged by that many of them,
+/// spread evenly along it (a wall or a large post returns a hundred hits a scan, and
+/// the fractions of a sample spread along it are the cluster's within a few per cent).
 /// The hits are looked at in order until the answer is settled whatever the rest
 /// show: the counts only grow, so too many in free space or too few left to make half
 /// on a surface is no, and enough on a surface with too few left to make a tenth in
 /// free space is yes.
 fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]) -> bool {
-    let n = points.len();
+    let n = points.len().min(STILL_SAMPLES);
     let still = |surface: usize, free: usize| surface >= 2 && 2 * surface >= n && 10 * free <= n;
     let (mut surface, mut free) = (0usize, 0usize);
-    for (i, p) in points.iter().enumerate() {
+    for (i, p) in still_sample(points).enumerate() {
         match past
             .view
             .surface_at_cached(&past.laser, p.world, STILL_TOLERANCE, hits)
@@ -390,6 +393,16 @@ fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]
         }
     }
     still(surface, free)
+}
+
+/// The most hits of a cluster [`cluster_still`] looks at.
+const STILL_SAMPLES: usize = 24;
+
+/// The hits of a cluster [`cluster_still`] looks at: all of them, or
+/// [`STILL_SAMPLES`] spread evenly from the first.
+fn still_sample(points: &[ScanPoint]) -> impl Iterator<Item = &ScanPoint> {
+    let m = points.len().min(STILL_SAMPLES);
+    (0..m).filter_map(move |i| points.get(i * points.len() / m))
 }
 
 /// `velocity` once it has been significant since `moving_since` for
@@ -1391,7 +1404,7 @@ mod tests {
     }
 
     #[test]
-    fn a_cluster_is_judged_still_as_counting_all_its_hits_judges_it() {
+    fn a_cluster_is_judged_still_as_counting_its_sampled_hits_judges_it() {
         // A wall 5 m ahead across 61 beams, with a gap of no returns and a nearer object.
         let mut ranges: Vec<f32> = (0..61)
             .map(|i| (5.0 / (f64::from(i) - 30.0).to_radians().cos()) as f32)
@@ -1425,12 +1438,11 @@ mod tests {
             })
             .collect();
         let counted = |c: &[ScanPoint]| {
-            let seen: Vec<Seen> = c
-                .iter()
+            let seen: Vec<Seen> = still_sample(c)
                 .map(|p| past.view.surface_at(&past.laser, p.world, STILL_TOLERANCE))
                 .collect();
             let count = |s: Seen| seen.iter().filter(|&&x| x == s).count();
-            let (surface, free, n) = (count(Seen::Surface), count(Seen::Free), c.len());
+            let (surface, free, n) = (count(Seen::Surface), count(Seen::Free), seen.len());
             surface >= 2 && 2 * surface >= n && 10 * free <= n
         };
         let mut hits = past.view.hit_cache();
@@ -1444,6 +1456,34 @@ mod tests {
             }
         }
         assert!(answers[0] > 100 && answers[1] > 100, "{answers:?}");
+    }
+
+    #[test]
+    fn a_large_clusters_sample_spreads_from_its_first_hit_to_its_last() {
+        let points: Vec<ScanPoint> = (0..100)
+            .map(|beam| ScanPoint {
+                beam,
+                range: 1.0,
+                angle: 0.0,
+                laser: [0.0; 2],
+                vehicle: [0.0; 2],
+                world: [0.0; 2],
+            })
+            .collect();
+        let beams =
+            |n: usize| -> Vec<usize> { still_sample(&points[..n]).map(|p| p.beam).collect() };
+        assert_eq!(
+            beams(5),
+            [0, 1, 2, 3, 4],
+            "a small cluster is looked at whole"
+        );
+        let sample = beams(100);
+        assert_eq!(sample.len(), STILL_SAMPLES);
+        assert_eq!((sample[0], sample[STILL_SAMPLES - 1]), (0, 95));
+        assert!(
+            sample.windows(2).all(|w| (4..=5).contains(&(w[1] - w[0]))),
+            "{sample:?}"
+        );
     }
 
     #[test]
