@@ -185,25 +185,31 @@ impl ActuatorMonitor {
         }
         // The span of the window's angles only grows as they are taken in: once it
         // reaches STEER_FROZEN_DEG the steering moved, and the rest need not be looked at.
-        let span = self
+        // The histories are in time order: a window's first entry is found by bisection.
+        let recent = self
             .angles
-            .iter()
-            .filter(|(t, _)| now - t <= STEER_WINDOW_S)
-            .try_fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, a)| {
+            .partition_point(|(t, _)| now - t > STEER_WINDOW_S);
+        let span = self.angles.range(recent..).try_fold(
+            (f64::INFINITY, f64::NEG_INFINITY),
+            |(lo, hi), (_, a)| {
                 let (lo, hi) = (lo.min(*a), hi.max(*a));
                 if hi - lo >= STEER_FROZEN_DEG {
                     None
                 } else {
                     Some((lo, hi))
                 }
-            });
+            },
+        );
         let Some((lo, hi)) = span else {
             return;
         };
+        let since = self
+            .steer_cmds
+            .partition_point(|(t, _, _)| now - t > STEER_WINDOW_S);
         let asked: Vec<(bool, f64)> = self
             .steer_cmds
-            .iter()
-            .filter(|(t, _, _)| now - t <= STEER_WINDOW_S && now - t >= RESPONSE_S)
+            .range(since..)
+            .filter(|(t, _, _)| now - t >= RESPONSE_S)
             .map(|(_, e, a)| (*e, *a))
             .collect();
         if asked.is_empty() || asked.iter().any(|(e, _)| !e) {
@@ -218,7 +224,7 @@ impl ActuatorMonitor {
         });
         let still_asked = self
             .steer_cmds
-            .iter()
+            .range(since..)
             .filter(|(t, _, _)| now - t >= RESPONSE_S && now - t < RESPONSE_S + STEER_ASKS_S)
             .all(|(_, _, a)| (a - r.angle).abs() > STEER_OFF_DEG);
         if (farthest - r.angle).abs() > STEER_OFF_DEG && still_asked {
