@@ -60,20 +60,36 @@ impl E2eError {
     }
 }
 
-/// CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, xor-out 0xFF.
+/// CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, xor-out 0xFF; a byte at a
+/// time through [`CRC8_TABLE`].
 pub fn crc8_sae_j1850(bytes: &[u8]) -> u8 {
-    let mut crc: u8 = 0xFF;
-    for &b in bytes {
-        crc ^= b;
-        for _ in 0..8 {
+    bytes
+        .iter()
+        .fold(0xFF, |crc: u8, &b| CRC8_TABLE[usize::from(crc ^ b)])
+        ^ 0xFF
+}
+
+/// The CRC register after shifting each byte value through the polynomial, eight bits.
+const CRC8_TABLE: [u8; 256] = crc8_table();
+
+const fn crc8_table() -> [u8; 256] {
+    let mut table = [0u8; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut crc = i as u8;
+        let mut bit = 0;
+        while bit < 8 {
             crc = if crc & 0x80 != 0 {
                 (crc << 1) ^ 0x1D
             } else {
                 crc << 1
             };
+            bit += 1;
         }
+        table[i] = crc;
+        i += 1;
     }
-    crc ^ 0xFF
+    table
 }
 
 /// The CRC of a frame: over the ID (two bytes, big-endian) and data bytes 0-6.

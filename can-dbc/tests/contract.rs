@@ -74,6 +74,40 @@ fn crc8_sae_j1850_check_value() {
 }
 
 #[test]
+fn the_table_driven_crc_equals_the_bitwise_definition() {
+    // poly 0x1D, init 0xFF, xor-out 0xFF, a bit at a time.
+    let bitwise = |bytes: &[u8]| {
+        let mut crc: u8 = 0xFF;
+        for &b in bytes {
+            crc ^= b;
+            for _ in 0..8 {
+                crc = if crc & 0x80 != 0 {
+                    (crc << 1) ^ 0x1D
+                } else {
+                    crc << 1
+                };
+            }
+        }
+        crc ^ 0xFF
+    };
+    for b in 0..=255u8 {
+        assert_eq!(crc8_sae_j1850(&[b]), bitwise(&[b]), "{b:#04x}");
+    }
+    // Frames' worth of pseudo-random bytes (a 32-bit LCG).
+    let mut x: u32 = 12345;
+    let mut byte = || {
+        x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (x >> 24) as u8
+    };
+    for len in 0..=12 {
+        for _ in 0..200 {
+            let bytes: Vec<u8> = (0..len).map(|_| byte()).collect();
+            assert_eq!(crc8_sae_j1850(&bytes), bitwise(&bytes), "{bytes:?}");
+        }
+    }
+}
+
+#[test]
 fn crc_covers_id_big_endian_then_bytes_0_to_6() {
     let data = [1, 2, 3, 4, 5, 6, 7, 0xAA];
     let by_hand = crc8_sae_j1850(&[0x01, 0x00, 1, 2, 3, 4, 5, 6, 7]);
