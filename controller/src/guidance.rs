@@ -157,6 +157,12 @@ const PROGRESS_BACK: f64 = 2.0;
 const PROGRESS_AHEAD: f64 = 5.0;
 /// Progress this near the route's length is at its end (past the goal), metres.
 const ROUTE_END: f64 = 1e-9;
+/// The car arrives this far inside the goal's tolerance (metres; at most half of it),
+/// short of the route's end: it judges arrival by its estimate of the pose, which RTK
+/// puts a few millimetres to centimetres off the true one, and a car stopped on the
+/// tolerance's edge by its estimate may stand a hair outside it (barn-211: 0.8 mm out,
+/// judged not arrived).
+const ARRIVAL_MARGIN: f64 = 0.05;
 /// Below this speed the car stands (for recovery, and at the end of a reversal), m/s.
 pub const STANDING: f64 = 0.05;
 /// A path being followed is kept past a replanning that finds none only with the car
@@ -1223,8 +1229,12 @@ impl Navigator {
         // (a lap, a switchback) is driven first.
         let tolerance = self.cfg.mission.goal_tolerance;
         let left = self.route.length() - self.progress;
-        if to_goal <= tolerance
-            && (left <= tolerance || self.progress >= self.route.last_leg_start())
+        let within = if left <= ROUTE_END {
+            tolerance
+        } else {
+            tolerance - ARRIVAL_MARGIN.min(tolerance / 2.0)
+        };
+        if to_goal <= within && (left <= tolerance || self.progress >= self.route.last_leg_start())
         {
             return Guidance::Arrived;
         }
@@ -2550,6 +2560,30 @@ mod tests {
                 goal.y
             );
         }
+    }
+
+    #[test]
+    fn the_car_arrives_a_margin_inside_the_goals_tolerance_short_of_the_routes_end() {
+        let mut cfg = route_to(&[], (30.0, 0.0));
+        cfg.mission.goal_tolerance = 2.0;
+        let arrived = |x: f64| {
+            let mut nav = Navigator::new(&cfg).expect("navigator");
+            matches!(nav.follow(&car_at(x, 0.0, 0.0, 0.0)), Guidance::Arrived)
+        };
+        assert!(!arrived(28.0), "on the tolerance's edge by the estimate");
+        assert!(
+            !arrived(30.0 - 2.0 + ARRIVAL_MARGIN - 0.01),
+            "within the margin"
+        );
+        assert!(
+            arrived(30.0 - 2.0 + ARRIVAL_MARGIN + 0.01),
+            "inside the margin"
+        );
+        // At the route's end the whole tolerance counts (the car can go no further).
+        let mut nav = Navigator::new(&cfg).expect("navigator");
+        let beside = car_at(30.0, 1.99, 0.0, 0.0);
+        nav.progress = nav.route.length();
+        assert!(matches!(nav.follow(&beside), Guidance::Arrived));
     }
 
     #[test]
