@@ -372,10 +372,11 @@ const STILL_SPEED: f64 = STILL_TOLERANCE / STILL_BASELINE_S;
 /// on a surface is no, and enough on a surface with too few left to make a tenth in
 /// free space is yes.
 fn cluster_still(points: &[ScanPoint], past: &PastView, hits: &mut [Option<Hit>]) -> bool {
-    let n = points.len().min(STILL_SAMPLES);
+    let sample = still_sample(points);
+    let n = sample.len();
     let still = |surface: usize, free: usize| surface >= 2 && 2 * surface >= n && 10 * free <= n;
     let (mut surface, mut free) = (0usize, 0usize);
-    for (i, p) in still_sample(points).enumerate() {
+    for (i, p) in sample.enumerate() {
         match past
             .view
             .surface_at_cached(&past.laser, p.world, STILL_TOLERANCE, hits)
@@ -400,9 +401,10 @@ const STILL_SAMPLES: usize = 24;
 
 /// The hits of a cluster [`cluster_still`] looks at: all of them, or
 /// [`STILL_SAMPLES`] spread evenly from the first.
-fn still_sample(points: &[ScanPoint]) -> impl Iterator<Item = &ScanPoint> {
+fn still_sample(points: &[ScanPoint]) -> impl ExactSizeIterator<Item = &ScanPoint> {
     let m = points.len().min(STILL_SAMPLES);
-    (0..m).filter_map(move |i| points.get(i * points.len() / m))
+    // i < m <= len, so i * len / m < len.
+    (0..m).map(move |i| &points[i * points.len() / m])
 }
 
 /// `velocity` once it has been significant since `moving_since` for
